@@ -1,0 +1,40 @@
+# cellsight: the two commands of the README, plus bench.
+#   make demo   install what is missing, build, run the simulated cell cycle headless → out/demo/
+#   make test   install what is missing, build, run every test (ctest); non-zero on any failure
+#   make bench  build and run the benchmarks (figures in docs/)
+SHELL := /bin/bash
+export PATH := /usr/bin:/bin:/usr/sbin:/sbin:$(PATH)
+BUILD ?= _build
+JOBS ?= 2
+
+.PHONY: all deps configure build test demo bench clean format
+
+all: build
+
+deps:
+	@bash scripts/install-deps.sh
+
+$(BUILD)/CMakeCache.txt:
+	@mkdir -p $(BUILD)/devel/lib/python3/dist-packages
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DCATKIN_ENABLE_TESTING=ON
+
+configure: deps $(BUILD)/CMakeCache.txt
+
+build: configure
+	cmake --build $(BUILD) -j$(JOBS)
+	cmake --build $(BUILD) -j$(JOBS) --target tests
+
+test: build
+	@bash scripts/run-tests.sh $(BUILD)
+
+demo: build
+	@bash scripts/demo.sh $(BUILD) out/demo
+
+bench: build
+	@bash scripts/bench.sh $(BUILD)
+
+format:
+	clang-format -i $$(git ls-files '*.cpp' '*.hpp')
+
+clean:
+	rm -rf $(BUILD)

@@ -1,0 +1,55 @@
+// Triangle meshes: PLY (ASCII / binary little-endian) and STL (ASCII / binary) input, binary PLY
+// output, validation, and primitive builders used to make the shipped part models.
+#pragma once
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <string>
+#include <vector>
+
+namespace cellsight {
+
+struct TriangleMesh {
+  std::vector<Eigen::Vector3f> vertices;  ///< metres, in the mesh's own frame
+  std::vector<Eigen::Vector3i> faces;     ///< counter-clockwise seen from outside
+
+  void append(const TriangleMesh& other, const Eigen::Isometry3d& T = Eigen::Isometry3d::Identity());
+  void transform(const Eigen::Isometry3d& T);
+  Eigen::AlignedBox3f bounds() const;
+  double area() const;
+};
+
+/// Loads a PLY or STL file (chosen by extension, then by content). `scale` multiplies every
+/// coordinate (e.g. 0.001 for meshes in millimetres). Throws ConfigError naming the file.
+TriangleMesh loadMesh(const std::string& path, double scale = 1.0);
+
+/// Writes a binary little-endian PLY atomically.
+void saveMeshPly(const std::string& path, const TriangleMesh& mesh);
+
+struct MeshCheck {
+  size_t degenerate_faces = 0;     ///< zero area or repeated vertex index
+  size_t bad_indices = 0;          ///< index out of range
+  size_t boundary_edges = 0;       ///< edges used by one face (holes)
+  size_t nonmanifold_edges = 0;    ///< edges used by more than two faces
+  bool ok() const { return degenerate_faces == 0 && bad_indices == 0 && nonmanifold_edges == 0; }
+  std::string describe() const;
+};
+
+/// Checks topology; `min_area` in m² counts faces below it as degenerate.
+MeshCheck checkMesh(const TriangleMesh& mesh, double min_area = 1e-14);
+
+/// Loads and validates: throws ConfigError if the file is unreadable, empty, has bad indices,
+/// degenerate faces or non-manifold edges.
+TriangleMesh loadValidMesh(const std::string& path, double scale = 1.0);
+
+// ---- primitives (closed, outward-facing) ----
+TriangleMesh makeBox(const Eigen::Vector3d& size);  ///< centred at the origin
+/// Cylinder along z from z=0 to z=height; `segments` around.
+TriangleMesh makeCylinder(double radius, double height, int segments = 48);
+/// Tube (annulus) along z: outer and inner radius.
+TriangleMesh makeTube(double outer_radius, double inner_radius, double height, int segments = 48);
+/// Geodesic sphere centred at the origin.
+TriangleMesh makeSphere(double radius, int subdivisions = 4);
+/// Extrudes a simple counter-clockwise polygon (x, y) along z from 0 to height.
+TriangleMesh makeExtrusion(const std::vector<Eigen::Vector2d>& polygon, double height);
+
+}  // namespace cellsight

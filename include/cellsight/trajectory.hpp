@@ -1,0 +1,26 @@
+// Named projector trajectories (config/trajectories.yaml): flange poses in the robot base frame.
+#pragma once
+#include <Eigen/Geometry>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace cellsight {
+
+struct Trajectory {
+  std::string name;
+  std::string type;  ///< linear | rotation | poses
+  std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> poses;
+};
+
+/// Loads every trajectory of a file. Types:
+///  linear:   start, end (poses), steps (≥ 2) — translation interpolated, rotation slerped;
+///  rotation: start (pose), pivot [m], axis, angle_from, angle_to [rad], steps — the start pose
+///            rotated about the pivot;
+///  poses:    poses (list of poses).
+std::map<std::string, Trajectory> loadTrajectories(const std::string& path);
+
+/// Linear interpolation between two poses (slerp for the rotation), `steps` ≥ 2 poses.
+Trajectory linearTrajectory(const Eigen::Isometry3d& start, const Eigen::Isometry3d& end, int steps);
+
+}  // namespace cellsight

@@ -1,0 +1,44 @@
+// Every translation between core types and ROS messages lives here (round-trip tested).
+#pragma once
+#include <geometry_msgs/Pose.h>
+#include <geometry_msgs/Transform.h>
+#include <geometry_msgs/TransformStamped.h>
+#include <ros/time.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <opencv2/core.hpp>
+
+#include "cellsight/calibration.hpp"
+#include "cellsight/camera_model.hpp"
+#include "cellsight/renderer.hpp"
+#include "cellsight/LaserPlaneStamped.h"
+
+namespace cellsight_ros {
+
+geometry_msgs::Pose toPoseMsg(const Eigen::Isometry3d& T);
+Eigen::Isometry3d fromPoseMsg(const geometry_msgs::Pose& msg);
+geometry_msgs::Transform toTransformMsg(const Eigen::Isometry3d& T);
+Eigen::Isometry3d fromTransformMsg(const geometry_msgs::Transform& msg);
+geometry_msgs::TransformStamped toTransformStamped(const cellsight::TransformCalibration& cal,
+                                                   const ros::Time& stamp);
+
+cellsight::LaserPlaneStamped toPlaneMsg(const cellsight::Plane& plane, const std::string& frame,
+                                        const ros::Time& stamp);
+cellsight::Plane fromPlaneMsg(const cellsight::LaserPlaneStamped& msg);
+
+sensor_msgs::CameraInfo toCameraInfo(const cellsight::CameraIntrinsics& cam,
+                                     const std::string& frame, const ros::Time& stamp);
+/// Throws std::invalid_argument naming the problem for a CameraInfo that is not usable
+/// (zero focal length, unsupported distortion model, non-finite values).
+cellsight::CameraIntrinsics fromCameraInfo(const sensor_msgs::CameraInfo& msg);
+
+/// CV_8UC1 → mono8, CV_8UC3 (RGB order) → rgb8.
+sensor_msgs::Image toImageMsg(const cv::Mat& image, const std::string& frame, const ros::Time& stamp);
+
+int64_t toNanoseconds(const ros::Time& t);
+ros::Time fromNanoseconds(int64_t ns);
+
+}  // namespace cellsight_ros

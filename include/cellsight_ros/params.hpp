@@ -1,0 +1,30 @@
+// Parameter loading with one place for each default and clear errors for required ones.
+#pragma once
+#include <ros/node_handle.h>
+
+#include <stdexcept>
+#include <string>
+
+namespace cellsight_ros {
+
+/// Reads a required private parameter; throws std::runtime_error naming it (and what it is for).
+template <typename T>
+T requireParam(const ros::NodeHandle& nh, const std::string& name, const std::string& what) {
+  T value;
+  if (!nh.getParam(name, value)) {
+    throw std::runtime_error("required parameter " + nh.resolveName(name) + " is not set (" +
+                             what + ")");
+  }
+  return value;
+}
+
+/// Reads an optional parameter, keeping `value` (the default) when it is absent.
+template <typename T>
+void param(const ros::NodeHandle& nh, const std::string& name, T& value) {
+  nh.param(name, value, value);
+}
+
+/// `$(find cellsight)` resolved at run time: the package's source folder.
+std::string packagePath();
+
+}  // namespace cellsight_ros

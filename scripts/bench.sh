@@ -1,0 +1,10 @@
+#!/usr/bin/env bash
+# Runs the benchmarks, one core each; results (JSON) land in <build>/bench/.
+set -euo pipefail
+BUILD=${1:-_build}
+source "$(dirname "$0")/ros-env.sh" "$BUILD"
+mkdir -p "$CELLSIGHT_BUILD/bench"
+echo "== bench_render: simulated scanner camera (one core)"
+taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_render" --benchmark_repetitions=3 \
+  --benchmark_report_aggregates_only=true \
+  --benchmark_out="$CELLSIGHT_BUILD/bench/render.json" --benchmark_out_format=json

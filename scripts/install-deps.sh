@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Installs every Debian package cellsight needs to build, test and run its demo.
+# Idempotent: packages already present are skipped; run as root or with sudo.
+set -euo pipefail
+export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
+export DEBIAN_FRONTEND=noninteractive
+
+PACKAGES=(
+  # build tools
+  build-essential cmake pkg-config ccache googletest libgtest-dev libbenchmark-dev
+  # ROS 1 (Debian's own packaging, under /usr)
+  catkin ros-message-generation ros-message-runtime libroscpp-dev
+  libtf2-ros-dev libtf2-eigen-dev libtf2-geometry-msgs-dev ros-tf2-msgs
+  libsensor-msgs-dev libgeometry-msgs-dev libvisualization-msgs-dev libstd-msgs-dev libstd-srvs-dev
+  ros-std-msgs ros-std-srvs ros-geometry-msgs ros-sensor-msgs ros-visualization-msgs ros-rosgraph-msgs
+  libactionlib-dev libactionlib-msgs-dev ros-actionlib-msgs python3-actionlib
+  libcv-bridge-dev libimage-transport-dev
+  librosbag-dev python3-rosbag librostest-dev python3-rostest python3-roslaunch python3-rosmaster rosout
+  rosbash python3-rostopic python3-rosservice python3-rosnode python3-rosparam
+  python3-rospy python3-sensor-msgs python3-geometry-msgs python3-tf2-ros python3-nose python3-yaml
+  rviz
+  # core libraries
+  libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libembree-dev libtbb-dev
+  libqrencode-dev libzbar-dev
+  # headless rviz screenshots
+  xvfb x11-utils imagemagick libgl1-mesa-dri mesa-utils
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+echo "install-deps: installing ${#missing[@]} packages: ${missing[*]}"
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "install-deps: done"

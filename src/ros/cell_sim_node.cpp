@@ -1,0 +1,310 @@
+// cell_sim: the built-in simulated robot cell. Publishes what real drivers publish (scanner and
+// fixture camera images + camera_info, base_link→flange in tf), simulates the robot's motion and
+// the two-signal stop-and-go handshake (docs/interfaces.md), and writes the ground truth.
+#include <geometry_msgs/TransformStamped.h>
+#include <image_transport/image_transport.h>
+#include <ros/ros.h>
+#include <std_msgs/Bool.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <chrono>
+#include <fstream>
+#include <memory>
+#include <mutex>
+
+#include "cellsight/MoveFlange.h"
+#include "cellsight/ground_truth.hpp"
+#include "cellsight/renderer.hpp"
+#include "cellsight/scene.hpp"
+#include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/params.hpp"
+
+namespace {
+
+using cellsight::MoveFlange;
+
+class CellSim {
+ public:
+  CellSim(ros::NodeHandle& nh, ros::NodeHandle& pnh) : it_(nh) {
+    std::string scene_file = cellsight_ros::requireParam<std::string>(
+        pnh, "scene", "path of the scene YAML, e.g. $(find cellsight)/config/scenes/demo.yaml");
+    cellsight::Scene scene = cellsight::loadScene(scene_file);
+    bool noise = scene.noise.enabled;
+    cellsight_ros::param(pnh, "noise", noise);
+    scene.noise.enabled = noise;
+    cellsight_ros::param(pnh, "truth_dir", truth_dir_);
+    cellsight_ros::param(pnh, "handshake", handshake_);
+    double tf_rate = 100.0;
+    cellsight_ros::param(pnh, "tf_rate", tf_rate);
+    if (!(tf_rate > 0)) throw std::runtime_error("~tf_rate must be > 0");
+
+    const auto t0 = std::chrono::steady_clock::now();
+    geometry_ = std::make_shared<cellsight::CellGeometry>(scene);
+    scanner_ = std::make_unique<cellsight::ScannerRenderer>(geometry_);
+    fixture_ = std::make_unique<cellsight::FixtureRenderer>(geometry_);
+    ROS_INFO("cell_sim: scene '%s' (%zu objects, %zu fixtures) ready in %.2f s",
+             scene.name.c_str(), scene.objects.size(), scene.fixtures.size(),
+             std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+
+    const cellsight::Scene& s = geometry_->scene();
+    pose_ = s.robot.home;
+    if (!truth_dir_.empty()) {
+      cellsight::writeSceneTruth(s, truth_dir_);
+      frames_truth_.open(truth_dir_ + "/frames_truth.jsonl", std::ios::app);
+      if (!frames_truth_) throw std::runtime_error(truth_dir_ + "/frames_truth.jsonl: cannot open");
+      ROS_INFO("cell_sim: ground truth and true calibration written to %s", truth_dir_.c_str());
+    } else {
+      ROS_WARN("cell_sim: ~truth_dir is empty: no ground truth is written");
+    }
+
+    scanner_pub_ = it_.advertiseCamera("scanner_camera/image_raw", 2);
+    fixture_pub_ = it_.advertiseCamera("fixture_camera/image_raw", 2);
+    in_position_pub_ = nh.advertise<std_msgs::Bool>("io/in_position", 1, true);
+    plane_pub_ = nh.advertise<cellsight::LaserPlaneStamped>("truth/laser_plane", 10);
+    markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("sim/scene_markers", 1, true);
+    capture_done_sub_ = nh.subscribe("io/capture_done", 10, &CellSim::onCaptureDone, this);
+    move_srv_ = nh.advertiseService("robot/move_flange", &CellSim::onMove, this);
+    publishMarkers();
+    setInPosition(true);
+
+    tf_timer_ = nh.createTimer(ros::Duration(1.0 / tf_rate), &CellSim::onTick, this);
+    if (s.fixture_camera.frame_rate > 0) {
+      fixture_timer_ = nh.createTimer(ros::Duration(1.0 / s.fixture_camera.frame_rate),
+                                      &CellSim::onFixtureFrame, this);
+    }
+    if (s.scanner_camera.frame_rate > 0) {
+      scanner_timer_ = nh.createTimer(ros::Duration(1.0 / s.scanner_camera.frame_rate),
+                                      [this](const ros::TimerEvent&) { capture(ros::Time::now()); });
+    }
+  }
+
+ private:
+  bool onMove(MoveFlange::Request& req, MoveFlange::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const cellsight::Scene& s = geometry_->scene();
+    if (!req.target.header.frame_id.empty() && req.target.header.frame_id != s.base_frame) {
+      res.status = MoveFlange::Response::REJECTED_INVALID;
+      res.message = "target frame '" + req.target.header.frame_id + "' is not the robot base '" +
+                    s.base_frame + "'";
+      return true;
+    }
+    Eigen::Isometry3d target;
+    try {
+      target = cellsight_ros::fromPoseMsg(req.target.pose);
+    } catch (const std::exception& e) {
+      res.status = MoveFlange::Response::REJECTED_INVALID;
+      res.message = e.what();
+      return true;
+    }
+    if (moving_) {
+      res.status = MoveFlange::Response::REJECTED_BUSY;
+      res.message = "robot is still moving";
+      return true;
+    }
+    if (handshake_ && awaiting_capture_) {
+      res.status = MoveFlange::Response::REJECTED_BUSY;
+      res.message = "robot waits for io/capture_done after the last in-position signal";
+      return true;
+    }
+    if (!s.robot.reach.contains(target.translation())) {
+      res.status = MoveFlange::Response::REJECTED_UNREACHABLE;
+      res.message = "target outside the robot's reach box";
+      return true;
+    }
+    const double scale = req.speed_scale > 0 && req.speed_scale <= 1 ? req.speed_scale : 1.0;
+    const double dist = (target.translation() - pose_.translation()).norm();
+    const double angle = Eigen::AngleAxisd(pose_.linear().transpose() * target.linear()).angle();
+    duration_ = std::max(dist / s.robot.linear_speed, angle / s.robot.angular_speed) / scale;
+    start_pose_ = pose_;
+    target_pose_ = target;
+    move_start_ = ros::Time::now();
+    moving_ = true;
+    setInPosition(false);
+    res.status = MoveFlange::Response::OK;
+    res.message = "moving";
+    res.expected_duration = duration_ + s.robot.settle_time;
+    return true;
+  }
+
+  void onCaptureDone(const std_msgs::Bool::ConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (msg->data) awaiting_capture_ = false;
+  }
+
+  void onTick(const ros::TimerEvent&) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const ros::Time now = ros::Time::now();
+    bool arrived = false;
+    if (moving_) {
+      const double t = (now - move_start_).toSec();
+      const double a = duration_ > 0 ? std::min(1.0, t / duration_) : 1.0;
+      const Eigen::Quaterniond q0(start_pose_.linear()), q1(target_pose_.linear());
+      pose_.linear() = q0.slerp(a, q1).toRotationMatrix();
+      pose_.translation() =
+          (1 - a) * start_pose_.translation() + a * target_pose_.translation();
+      if (t >= duration_ + geometry_->scene().robot.settle_time) {
+        pose_ = target_pose_;
+        moving_ = false;
+        arrived = true;
+      }
+    }
+    publishFlange(now);
+    if (arrived) {
+      awaiting_capture_ = true;
+      setInPosition(true);
+      // The in-position output is wired to the scanner camera's trigger input.
+      if (geometry_->scene().scanner_camera.frame_rate <= 0) {
+        lock.unlock();
+        capture(now);
+      }
+    }
+  }
+
+  void publishFlange(const ros::Time& stamp) {
+    const cellsight::Scene& s = geometry_->scene();
+    geometry_msgs::TransformStamped ts;
+    ts.header.stamp = stamp;
+    ts.header.frame_id = s.base_frame;
+    ts.child_frame_id = s.flange_frame;
+    ts.transform = cellsight_ros::toTransformMsg(pose_);
+    tf_.sendTransform(ts);
+  }
+
+  void capture(const ros::Time& stamp) {
+    Eigen::Isometry3d pose;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      pose = pose_;
+    }
+    const cellsight::Scene& s = geometry_->scene();
+    const auto t0 = std::chrono::steady_clock::now();
+    const cv::Mat image = scanner_->render(pose, s.noise.seed * 1000003ull + frame_count_);
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    const cellsight::Plane plane = scanner_->planeInCamera(pose);
+    auto img = boost::make_shared<sensor_msgs::Image>(
+        cellsight_ros::toImageMsg(image, s.scanner_camera.frame_id, stamp));
+    auto info = boost::make_shared<sensor_msgs::CameraInfo>(
+        cellsight_ros::toCameraInfo(s.scanner_camera.intrinsics, s.scanner_camera.frame_id, stamp));
+    scanner_pub_.publish(img, info);
+    plane_pub_.publish(cellsight_ros::toPlaneMsg(plane, s.scanner_camera.frame_id, stamp));
+    if (frames_truth_.is_open()) {
+      frames_truth_ << cellsight::frameTruthJsonLine(frame_count_, cellsight_ros::toNanoseconds(stamp),
+                                                     pose, plane);
+      frames_truth_.flush();
+    }
+    ROS_DEBUG("cell_sim: scanner frame %d rendered in %.1f ms", frame_count_, ms);
+    ++frame_count_;
+  }
+
+  void onFixtureFrame(const ros::TimerEvent&) {
+    if (fixture_pub_.getNumSubscribers() == 0) return;
+    const cellsight::Scene& s = geometry_->scene();
+    const ros::Time stamp = ros::Time::now();
+    const cv::Mat image = fixture_->render(s.noise.seed * 7919ull + fixture_count_++);
+    auto img = boost::make_shared<sensor_msgs::Image>(
+        cellsight_ros::toImageMsg(image, s.fixture_camera.frame_id, stamp));
+    auto info = boost::make_shared<sensor_msgs::CameraInfo>(
+        cellsight_ros::toCameraInfo(s.fixture_camera.intrinsics, s.fixture_camera.frame_id, stamp));
+    fixture_pub_.publish(img, info);
+  }
+
+  void setInPosition(bool value) {
+    std_msgs::Bool b;
+    b.data = value;
+    in_position_pub_.publish(b);
+  }
+
+  void publishMarkers() {
+    const cellsight::Scene& s = geometry_->scene();
+    visualization_msgs::MarkerArray arr;
+    int id = 0;
+    auto base = [&](const std::string& ns) {
+      visualization_msgs::Marker m;
+      m.header.frame_id = s.base_frame;
+      m.ns = ns;
+      m.id = id++;
+      m.action = visualization_msgs::Marker::ADD;
+      m.pose.orientation.w = 1;
+      m.scale.x = m.scale.y = m.scale.z = 1;
+      m.color.a = 1;
+      return m;
+    };
+    visualization_msgs::Marker table = base("table");
+    table.type = visualization_msgs::Marker::CUBE;
+    table.pose.position.x = s.table.center.x();
+    table.pose.position.y = s.table.center.y();
+    table.pose.position.z = s.table.z - 0.01;
+    table.scale.x = s.table.size.x();
+    table.scale.y = s.table.size.y();
+    table.scale.z = 0.02;
+    table.color.r = table.color.g = table.color.b = 0.45f;
+    arr.markers.push_back(table);
+    for (const auto& o : s.objects) {
+      visualization_msgs::Marker m = base("objects");
+      m.type = visualization_msgs::Marker::TRIANGLE_LIST;
+      m.pose = cellsight_ros::toPoseMsg(o.T_base_object);
+      const cellsight::TriangleMesh mesh = cellsight::loadValidMesh(o.info.mesh_file);
+      for (const auto& f : mesh.faces) {
+        for (int k = 0; k < 3; ++k) {
+          geometry_msgs::Point p;
+          p.x = mesh.vertices[f[k]].x();
+          p.y = mesh.vertices[f[k]].y();
+          p.z = mesh.vertices[f[k]].z();
+          m.points.push_back(p);
+        }
+      }
+      m.color.r = 0.2f + 0.6f * static_cast<float>(o.reflectivity);
+      m.color.g = 0.55f;
+      m.color.b = 0.75f;
+      arr.markers.push_back(m);
+    }
+    for (const auto& f : s.fixtures) {
+      visualization_msgs::Marker m = base("fixtures");
+      m.type = visualization_msgs::Marker::CUBE;
+      m.pose = cellsight_ros::toPoseMsg(f.T_base_fixture);
+      m.scale.x = m.scale.y = f.plate_size;
+      m.scale.z = 0.003;
+      m.color.r = m.color.g = m.color.b = 0.95f;
+      arr.markers.push_back(m);
+    }
+    markers_pub_.publish(arr);
+  }
+
+  image_transport::ImageTransport it_;
+  std::shared_ptr<const cellsight::CellGeometry> geometry_;
+  std::unique_ptr<cellsight::ScannerRenderer> scanner_;
+  std::unique_ptr<cellsight::FixtureRenderer> fixture_;
+  std::string truth_dir_;
+  bool handshake_ = true;
+  std::ofstream frames_truth_;
+  tf2_ros::TransformBroadcaster tf_;
+  image_transport::CameraPublisher scanner_pub_, fixture_pub_;
+  ros::Publisher in_position_pub_, plane_pub_, markers_pub_;
+  ros::Subscriber capture_done_sub_;
+  ros::ServiceServer move_srv_;
+  ros::Timer tf_timer_, fixture_timer_, scanner_timer_;
+  std::mutex mutex_;
+  Eigen::Isometry3d pose_, start_pose_, target_pose_;
+  ros::Time move_start_;
+  double duration_ = 0;
+  bool moving_ = false;
+  bool awaiting_capture_ = false;
+  int frame_count_ = 0;
+  uint64_t fixture_count_ = 0;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "cell_sim");
+  ros::NodeHandle nh, pnh("~");
+  try {
+    CellSim sim(nh, pnh);
+    ros::spin();
+  } catch (const std::exception& e) {
+    ROS_FATAL("cell_sim cannot start: %s", e.what());
+    return 1;
+  }
+  return 0;
+}
