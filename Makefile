@@ -27,7 +27,7 @@ build: configure
 test: build
 	@bash scripts/run-tests.sh $(BUILD)
 
-demo: build
+demo:
 	@bash scripts/demo.sh $(BUILD) out/demo
 
 bench: build

@@ -2,8 +2,10 @@
 # Usage: source scripts/ros-env.sh <build folder>
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 CELLSIGHT_BUILD=$(cd "$1" && pwd)
+case $- in *u*) _cs_nounset=1; set +u ;; *) _cs_nounset=0 ;; esac
 # shellcheck disable=SC1091
 source "$CELLSIGHT_BUILD/devel/setup.bash"
+[ "$_cs_nounset" = 1 ] && set -u
 export ROS_HOME="$CELLSIGHT_BUILD/ros_home"
 export ROS_LOG_DIR="$ROS_HOME/log"
 mkdir -p "$ROS_LOG_DIR"

@@ -268,6 +268,26 @@ class CellSim {
       m.color.r = m.color.g = m.color.b = 0.95f;
       arr.markers.push_back(m);
     }
+    // The light sheet as a translucent fan in the laser frame: rviz carries it with the flange.
+    visualization_msgs::Marker fan = base("laser_sheet");
+    fan.header.frame_id = s.laser_frame;
+    fan.type = visualization_msgs::Marker::TRIANGLE_LIST;
+    const double reach = 0.45, half = s.laser.fan_angle / 2;
+    const int n = 24;
+    for (int i = 0; i < n; ++i) {
+      const double a0 = -half + 2 * half * i / n, a1 = -half + 2 * half * (i + 1) / n;
+      geometry_msgs::Point o, p0, p1;
+      p0.x = reach * std::sin(a0);
+      p0.z = reach * std::cos(a0);
+      p1.x = reach * std::sin(a1);
+      p1.z = reach * std::cos(a1);
+      fan.points.insert(fan.points.end(), {o, p0, p1});
+    }
+    fan.color.r = 1.0f;
+    fan.color.g = 0.1f;
+    fan.color.b = 0.1f;
+    fan.color.a = 0.25f;
+    arr.markers.push_back(fan);
     markers_pub_.publish(arr);
   }
 

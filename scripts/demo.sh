@@ -1,0 +1,105 @@
+#!/usr/bin/env bash
+# make demo: install what is missing, build, run the simulated cell cycle headless.
+# Writes to <out>: images/ (captured frames), frames.json, truth/ (ground truth + true
+# calibration), raw.bag (images, camera_info, tf, I/O), rviz.png, report.json.
+# Usage: scripts/demo.sh [build folder] [out folder]
+set -euo pipefail
+BUILD=${1:-_build}
+OUT=${2:-out/demo}
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+cd "$ROOT"
+export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
+now() { date +%s.%N; }
+
+t0=$(now)
+bash scripts/install-deps.sh
+t1=$(now)
+make --no-print-directory build BUILD="$BUILD" >/dev/null
+t2=$(now)
+
+source scripts/ros-env.sh "$BUILD"
+source scripts/rviz-shot.sh
+OUT=$(realpath -m "$OUT")
+rm -rf "$OUT"
+mkdir -p "$OUT"
+LAUNCH_PID=""
+cleanup() {
+  [ -n "$LAUNCH_PID" ] && kill -INT "$LAUNCH_PID" 2>/dev/null && wait "$LAUNCH_PID" 2>/dev/null
+  [ -n "${XVFB_PID:-}" ] && kill "$XVFB_PID" 2>/dev/null
+  return 0
+}
+trap cleanup EXIT
+start_xvfb
+echo "demo: simulated cell on $ROS_MASTER_URI, display $DISPLAY, output in $OUT"
+t3=$(now)
+roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$OUT" rviz:=true \
+  >"$OUT/launch.log" 2>&1 &
+LAUNCH_PID=$!
+
+# camera_trigger writes frames.json when the trajectory is done.
+deadline=$(( $(date +%s) + 600 ))
+while [ ! -f "$OUT/frames.json" ]; do
+  if ! kill -0 "$LAUNCH_PID" 2>/dev/null || grep -q "camera_trigger.*has died" "$OUT/launch.log"; then
+    echo "demo: FAILED: the scan did not complete; see $OUT/launch.log" >&2
+    grep -E "ERROR|FATAL|died" "$OUT/launch.log" | tail -5 >&2 || true
+    exit 1
+  fi
+  if [ "$(date +%s)" -gt "$deadline" ]; then
+    echo "demo: FAILED: no frames.json after 600 s; see $OUT/launch.log" >&2
+    exit 1
+  fi
+  sleep 0.5
+done
+t4=$(now)
+sleep 3  # let rviz draw the last frame
+screenshot "$OUT/rviz.png"
+kill -INT "$LAUNCH_PID"
+wait "$LAUNCH_PID" || true
+LAUNCH_PID=""
+t5=$(now)
+cp "$ROS_LOG_DIR"/latest/camera_trigger*.log "$OUT/" 2>/dev/null || true
+
+/usr/bin/python3 - "$OUT" "$t0" "$t1" "$t2" "$t3" "$t4" "$t5" <<'PY'
+import json, os, sys, subprocess
+import rosbag
+out = sys.argv[1]
+t0, t1, t2, t3, t4, t5 = map(float, sys.argv[2:8])
+frames = json.load(open(os.path.join(out, "frames.json")))
+bag_path = os.path.join(out, "raw.bag")
+topics = {}
+with rosbag.Bag(bag_path) as bag:
+    for topic, info in bag.get_type_and_topic_info().topics.items():
+        topics[topic] = {"type": info.msg_type, "messages": info.message_count}
+sd = subprocess.run(["/usr/bin/convert", os.path.join(out, "rviz.png"), "-colorspace", "Gray",
+                     "-format", "%[fx:standard_deviation]", "info:"],
+                    capture_output=True, text=True).stdout.strip()
+report = {
+    "what_ran": ["cell_sim", "calibration_publisher", "camera_trigger", "rosbag record", "rviz (Xvfb)"],
+    "scene": "config/scenes/demo.yaml",
+    "trajectory": frames["trajectory"],
+    "frames_planned": frames["poses"],
+    "frames": len(frames["frames"]),
+    "scan_seconds": round(frames["scan_seconds"], 3),
+    "seconds": {
+        "install_deps": round(t1 - t0, 2),
+        "build": round(t2 - t1, 2),
+        "launch_to_scan_done": round(t4 - t3, 2),
+        "shutdown_and_screenshot": round(t5 - t4, 2),
+        "total": round(t5 - t0, 2),
+    },
+    "bag": {"path": "raw.bag", "bytes": os.path.getsize(bag_path), "topics": topics},
+    "rviz_png_grey_stddev": float(sd) if sd else None,
+    "outputs": sorted(os.listdir(out)),
+}
+tmp = os.path.join(out, "report.json.tmp")
+with open(tmp, "w") as f:
+    json.dump(report, f, indent=2)
+    f.write("\n")
+os.replace(tmp, os.path.join(out, "report.json"))
+print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds")}, indent=1))
+missing = [t for t in ("/scanner_camera/image_raw", "/scanner_camera/camera_info", "/tf", "/tf_static") if t not in topics]
+if len(frames["frames"]) != frames["poses"] or missing:
+    print("demo: FAILED: frames %d/%d, topics missing from the bag: %s" % (len(frames["frames"]), frames["poses"], missing))
+    sys.exit(1)
+PY
+echo "demo: done: $OUT"
