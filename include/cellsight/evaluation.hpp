@@ -1,0 +1,37 @@
+// Scanner evaluation against the simulator's truth: distance of scan points to the true surfaces.
+#pragma once
+#include <Eigen/Geometry>
+#include <vector>
+
+#include "cellsight/scene.hpp"
+
+namespace cellsight {
+
+struct SurfaceErrorStats {
+  size_t points = 0;
+  double rms = 0, max = 0, mean_abs = 0, p99 = 0;  ///< metres
+};
+
+/// Exact distance from a point to the nearest true surface of a scene: the table top (a plane
+/// over its extent) and every object mesh (closest point on its triangles; objects whose
+/// bounding box is farther than the current best are skipped).
+class SurfaceDistance {
+ public:
+  explicit SurfaceDistance(const Scene& scene);
+  double operator()(const Eigen::Vector3d& p) const;
+  SurfaceErrorStats stats(const std::vector<Eigen::Vector3d>& points) const;
+
+ private:
+  struct Object {
+    std::vector<Eigen::Vector3d> a, b, c;  // triangle corners, base frame
+    Eigen::AlignedBox3d box;
+  };
+  std::vector<Object> objects_;
+  TableConfig table_;
+};
+
+/// Closest distance between point p and triangle (a, b, c).
+double pointTriangleDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
+                             const Eigen::Vector3d& b, const Eigen::Vector3d& c);
+
+}  // namespace cellsight

@@ -1,0 +1,37 @@
+// The accumulated scan as plain arrays (no PCL type in this header), and the cloud operations
+// the scanner needs; PCL does the work inside scan_cloud.cpp.
+#pragma once
+#include <Eigen/Geometry>
+#include <string>
+#include <vector>
+
+namespace cellsight {
+
+struct ScanCloud {
+  std::vector<Eigen::Vector3f> points;   ///< metres, in `frame_id`
+  std::vector<Eigen::Vector3f> normals;  ///< empty until estimateNormals
+  std::vector<float> intensity;
+  std::string frame_id = "base_link";
+  size_t size() const { return points.size(); }
+  void append(const Eigen::Vector3f& p, float i) {
+    points.push_back(p);
+    intensity.push_back(i);
+  }
+};
+
+/// Drops points whose mean distance to their k nearest neighbours exceeds the global mean by
+/// more than std_mul standard deviations (the thesis's statistical filter; PCL's SOR).
+ScanCloud statisticalOutlierRemoval(const ScanCloud& in, int k = 20, double std_mul = 2.5);
+/// Keeps the points inside the box.
+ScanCloud cropBox(const ScanCloud& in, const Eigen::AlignedBox3f& box);
+/// Normals from k neighbours, oriented towards `viewpoint` (e.g. the camera centre).
+void estimateNormals(ScanCloud& cloud, int k, const Eigen::Vector3f& viewpoint);
+/// Removes non-finite points; returns how many were removed.
+size_t removeNonFinite(ScanCloud& cloud);
+
+/// Writes PLY (binary) or PCD (binary) by extension, atomically. Throws std::runtime_error.
+void saveCloud(const std::string& path, const ScanCloud& cloud);
+/// Reads PLY or PCD (x y z, optional normals and intensity). Throws ConfigError naming the file.
+ScanCloud loadCloud(const std::string& path);
+
+}  // namespace cellsight

@@ -1,0 +1,31 @@
+// Laser triangulation (thesis §1): each line centre's undistorted camera ray cut with the light
+// sheet n·P + d = 0 (camera frame): t = −d / (n·r), P = t·r.
+#pragma once
+#include <Eigen/Core>
+#include <vector>
+
+#include "cellsight/camera_model.hpp"
+#include "cellsight/line_extraction.hpp"
+#include "cellsight/renderer.hpp"
+
+namespace cellsight {
+
+struct TriangulationConfig {
+  double min_ray_plane_angle = 0.05;  ///< rad; flatter rays are ill-conditioned and dropped
+  double min_range = 0.02;            ///< m from the camera centre
+  double max_range = 5.0;
+};
+
+struct ProfilePoint {
+  Eigen::Vector3d p;  ///< camera frame, metres
+  float intensity = 0;
+  float u = 0, v = 0;
+};
+
+/// Triangulates line centres against the sheet (camera frame). Points whose ray is nearly
+/// parallel to the sheet, or outside [min_range, max_range], are dropped.
+std::vector<ProfilePoint> triangulate(const std::vector<LinePoint>& line,
+                                      const CameraIntrinsics& camera, const Plane& plane_camera,
+                                      const TriangulationConfig& config = {});
+
+}  // namespace cellsight
