@@ -8,3 +8,7 @@ echo "== bench_render: simulated scanner camera (one core)"
 taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_render" --benchmark_repetitions=3 \
   --benchmark_report_aggregates_only=true \
   --benchmark_out="$CELLSIGHT_BUILD/bench/render.json" --benchmark_out_format=json
+echo "== bench_scanner: line extraction + triangulation per frame (one core)"
+taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_scanner" --benchmark_repetitions=3 \
+  --benchmark_report_aggregates_only=true \
+  --benchmark_out="$CELLSIGHT_BUILD/bench/scanner.json" --benchmark_out_format=json

@@ -3,6 +3,7 @@
 // tests and benchmarks; the ROS nodes run the same extraction and triangulation per frame.
 #pragma once
 #include <Eigen/Geometry>
+#include <memory>
 #include <vector>
 
 #include "cellsight/line_extraction.hpp"
@@ -18,6 +19,7 @@ struct ScannerCalibration {
   Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
   double reference_z = 0.0;  ///< height of the support plane (table), base frame
+  std::shared_ptr<const UndistortionMap> undistortion;  ///< built on first use when empty
   static ScannerCalibration fromScene(const Scene& scene);
 };
 

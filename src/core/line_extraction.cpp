@@ -21,7 +21,7 @@ double backgroundLevel(const cv::Mat& img, double percentile) {
   // Histogram of every 4th row: the line covers well under 2 % of the pixels.
   uint32_t hist[256] = {0};
   uint32_t n = 0;
-  for (int v = 0; v < img.rows; v += 4) {
+  for (int v = 0; v < img.rows; v += 8) {
     const uint8_t* r = img.ptr<uint8_t>(v);
     for (int u = 0; u < img.cols; ++u) ++hist[r[u]];
     n += static_cast<uint32_t>(img.cols);
@@ -56,11 +56,37 @@ void dropEdges(std::vector<LinePoint>& pts, const LineExtractionConfig& c, int& 
   pts.swap(kept);
 }
 
+/// Local polynomial fit of degree `deg` to (x_k, y_k), evaluated at x = 0.
+float localFit(const std::vector<LinePoint>& pts, long lo, long hi, size_t i, int deg, double scale) {
+  Eigen::Matrix4d AtA = Eigen::Matrix4d::Zero();
+  Eigen::Vector4d Atb = Eigen::Vector4d::Zero();
+  for (long k = lo; k <= hi; ++k) {
+    const double x = (pts[static_cast<size_t>(k)].u - pts[i].u) / scale;
+    Eigen::Vector4d phi(1, x, x * x, x * x * x);
+    for (int d = deg + 1; d < 4; ++d) phi[d] = 0;
+    AtA += phi * phi.transpose();
+    Atb += phi * pts[static_cast<size_t>(k)].v;
+  }
+  for (int d = deg + 1; d < 4; ++d) AtA(d, d) = 1;
+  return static_cast<float>(AtA.ldlt().solve(Atb)(0));
+}
+
 void smooth(std::vector<LinePoint>& pts, const LineExtractionConfig& c) {
   if (c.smoothing_degree <= 0 || pts.size() < 3) return;
   const int h = c.smoothing_half_window;
+  const int deg = std::min(c.smoothing_degree, 3);
+  // Savitzky–Golay weights for a full window of unit-spaced columns.
+  std::vector<double> sg(static_cast<size_t>(2 * h + 1));
+  {
+    Eigen::MatrixXd A(2 * h + 1, deg + 1);
+    for (int k = -h; k <= h; ++k) {
+      double p = 1;
+      for (int d = 0; d <= deg; ++d, p *= k / (h + 1.0)) A(k + h, d) = p;
+    }
+    const Eigen::MatrixXd P = (A.transpose() * A).ldlt().solve(A.transpose());
+    for (int k = 0; k <= 2 * h; ++k) sg[static_cast<size_t>(k)] = P(0, k);
+  }
   std::vector<float> out(pts.size());
-  // Segments of neighbouring columns without jumps.
   size_t start = 0;
   while (start < pts.size()) {
     size_t end = start + 1;
@@ -70,20 +96,16 @@ void smooth(std::vector<LinePoint>& pts, const LineExtractionConfig& c) {
     for (size_t i = start; i < end; ++i) {
       const long lo = std::max<long>(static_cast<long>(start), static_cast<long>(i) - h);
       const long hi = std::min<long>(static_cast<long>(end) - 1, static_cast<long>(i) + h);
-      const int deg = std::min<int>(c.smoothing_degree, static_cast<int>(hi - lo));
-      if (deg < 1) {
+      const bool full = hi - lo == 2 * h && pts[static_cast<size_t>(hi)].u - pts[static_cast<size_t>(lo)].u == 2.f * h;
+      if (full) {
+        double acc = 0;
+        for (long k = lo; k <= hi; ++k) acc += sg[static_cast<size_t>(k - lo)] * pts[static_cast<size_t>(k)].v;
+        out[i] = static_cast<float>(acc);
+      } else if (hi - lo >= 1) {
+        out[i] = localFit(pts, lo, hi, i, std::min<int>(deg, static_cast<int>(hi - lo)), h + 1.0);
+      } else {
         out[i] = pts[i].v;
-        continue;
       }
-      Eigen::MatrixXd A(hi - lo + 1, deg + 1);
-      Eigen::VectorXd b(hi - lo + 1);
-      for (long k = lo; k <= hi; ++k) {
-        const double x = pts[static_cast<size_t>(k)].u - pts[i].u;
-        double p = 1;
-        for (int d = 0; d <= deg; ++d, p *= x) A(k - lo, d) = p;
-        b(k - lo) = pts[static_cast<size_t>(k)].v;
-      }
-      out[i] = static_cast<float>(A.colPivHouseholderQr().solve(b)(0));
     }
     start = end;
   }
@@ -113,15 +135,27 @@ std::vector<LinePoint> extractLine(const cv::Mat& image, const LineExtractionCon
   st.background = backgroundLevel(img, c.background_percentile);
   const int W = img.cols, H = img.rows;
   const float bg = static_cast<float>(st.background);
-  // Pass 1 (row-major, cache friendly): per-column maximum and its row.
-  std::vector<uint8_t> mx(static_cast<size_t>(W), 0);
-  std::vector<int> am(static_cast<size_t>(W), 0);
-  for (int v = 0; v < H; ++v) {
-    const uint8_t* r = img.ptr<uint8_t>(v);
-    for (int u = 0; u < W; ++u) {
-      if (r[u] > mx[u]) {
-        mx[u] = r[u];
-        am[u] = v;
+  // Pass 1 (row-major, cache friendly, branch-free so the compiler vectorises it): per-column
+  // maximum and the first row where it occurs.
+  // Also the maximum of every block of kBlock rows, for the secondary-peak test below.
+  constexpr int kBlock = 8;
+  const int nblocks = (H + kBlock - 1) / kBlock;
+  std::vector<uint16_t> mx(static_cast<size_t>(W), 0);
+  std::vector<uint16_t> am(static_cast<size_t>(W), 0);
+  std::vector<uint8_t> bmax(static_cast<size_t>(nblocks) * W, 0);
+  {
+    uint16_t* __restrict m = mx.data();
+    uint16_t* __restrict a = am.data();
+    for (int v = 0; v < H; ++v) {
+      const uint8_t* __restrict r = img.ptr<uint8_t>(v);
+      uint8_t* __restrict bm = bmax.data() + static_cast<size_t>(v / kBlock) * W;
+      const uint16_t vv = static_cast<uint16_t>(v);
+      for (int u = 0; u < W; ++u) {
+        const uint16_t x = r[u];
+        const bool gt = x > m[u];
+        m[u] = gt ? x : m[u];
+        a[u] = gt ? vv : a[u];
+        bm[u] = r[u] > bm[u] ? r[u] : bm[u];
       }
     }
   }
@@ -150,21 +184,25 @@ std::vector<LinePoint> extractLine(const cv::Mat& image, const LineExtractionCon
     run_hi[u] = b;
     thr[u] = t;
   }
-  // Pass 2 (row-major): strongest pixel outside each column's run ± gap → reflections.
+  // Secondary peaks (reflections): the strongest pixel outside each column's run ± gap, from
+  // the block maxima; only blocks that touch the window are read pixel by pixel.
   if (c.secondary_peak_ratio > 0) {
-    std::vector<uint8_t> second(static_cast<size_t>(W), 0);
     const int gap = c.secondary_peak_gap;
-    for (int v = 0; v < H; ++v) {
-      const uint8_t* r = img.ptr<uint8_t>(v);
-      for (int u = 0; u < W; ++u) {
-        const bool outside = v < run_lo[u] - gap || v > run_hi[u] + gap;
-        const uint8_t x = outside ? r[u] : 0;
-        second[u] = std::max(second[u], x);
-      }
-    }
     for (int u = 0; u < W; ++u) {
       if (run_lo[u] < 0) continue;
-      if (second[u] - bg >= c.secondary_peak_ratio * (mx[u] - bg)) {
+      const int lo = run_lo[u] - gap, hi = run_hi[u] + gap;
+      int second = 0;
+      for (int b = 0; b < nblocks; ++b) {
+        const int r0 = b * kBlock, r1 = std::min(H - 1, r0 + kBlock - 1);
+        if (r1 < lo || r0 > hi) {
+          second = std::max<int>(second, bmax[static_cast<size_t>(b) * W + u]);
+        } else {
+          for (int v = r0; v <= r1; ++v) {
+            if (v < lo || v > hi) second = std::max(second, static_cast<int>(at(v, u)));
+          }
+        }
+      }
+      if (second - bg >= c.secondary_peak_ratio * (mx[u] - bg)) {
         run_lo[u] = -1;
         ++st.ambiguous;
       }

@@ -10,6 +10,7 @@ ScannerCalibration ScannerCalibration::fromScene(const Scene& s) {
   c.T_base_camera = s.scanner_camera.T_base_camera;
   c.T_flange_laser = s.laser.T_flange_laser;
   c.reference_z = s.table.z;
+  c.undistortion = std::make_shared<UndistortionMap>(c.intrinsics);
   return c;
 }
 
@@ -38,7 +39,9 @@ void addProfile(const cv::Mat& image, const Eigen::Isometry3d& T_base_flange,
   if (auto_direction) lc.line_along_rows = lineAlongRows(T_base_flange, cal);
   const auto pts = extractLine(image, lc, &st);
   const Plane plane = laserPlane(cal.T_base_camera.inverse() * T_base_flange * cal.T_flange_laser);
-  for (const auto& pp : triangulate(pts, cal.intrinsics, plane, tri)) {
+  const auto profile = cal.undistortion ? triangulate(pts, *cal.undistortion, plane, tri)
+                                        : triangulate(pts, cal.intrinsics, plane, tri);
+  for (const auto& pp : profile) {
     cloud.append((cal.T_base_camera * pp.p).cast<float>(), pp.intensity);
   }
   if (stats) {
