@@ -35,3 +35,23 @@ double pointTriangleDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
                              const Eigen::Vector3d& b, const Eigen::Vector3d& c);
 
 }  // namespace cellsight
+
+#include "cellsight/line_extraction.hpp"
+#include "cellsight/renderer.hpp"
+
+namespace cellsight {
+
+/// Line-centre accuracy on a rendered line with a known centre: the scene's objects are removed,
+/// the flange is placed so the sheet crosses the bare table, and each extracted centre is
+/// compared with the analytic projection of the sheet ∩ table line (px, along the search
+/// direction). Columns within 10 % of the line's ends are skipped (fan cut-off).
+struct LineCentreErrors {
+  size_t columns = 0;  ///< columns with a centre, compared
+  size_t expected = 0; ///< columns the line crosses (10 % margins excluded)
+  double rms_px = 0, max_px = 0, mean_px = 0;
+};
+LineCentreErrors lineCentreErrors(const ScannerRenderer& bare_renderer,
+                                  const Eigen::Isometry3d& T_base_flange,
+                                  const LineExtractionConfig& config, uint64_t seed);
+
+}  // namespace cellsight

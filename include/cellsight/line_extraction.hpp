@@ -19,10 +19,13 @@ struct LineExtractionConfig {
   /// false: the line runs along columns, one centre per row.
   bool line_along_rows = true;
   int channel = -1;                    ///< for colour images: channel index (RGB order); -1: mono
-  double background_percentile = 0.98; ///< background grey level: this histogram quantile
+  double background_percentile = 0.9;  ///< background grey level: this histogram quantile
   double min_contrast = 25;            ///< peak must exceed background by this many grey levels
   double threshold_fraction = 0.5;     ///< run threshold = bg + fraction · (peak − bg)
   int centroid_margin = 2;             ///< px added on each side of the run for the centroid
+  /// Centroid weights are I − (bg + floor · (peak − bg)), clipped at 0: a floor above the
+  /// background keeps noise in the tails out of the centre.
+  double centroid_floor = 0.1;
   int max_run = 40;                    ///< wider above-threshold runs are not a laser line
   /// A second peak ≥ ratio · main peak (measured above background) at ≥ gap px from the main
   /// run makes the column ambiguous (a reflection): it is dropped. 0 disables the check.

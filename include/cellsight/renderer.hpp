@@ -73,6 +73,7 @@ class ScannerRenderer {
   /// The true light plane in the camera optical frame for a flange pose.
   Plane planeInCamera(const Eigen::Isometry3d& T_base_flange) const;
   const CameraConfig& camera() const { return geometry_->scene().scanner_camera; }
+  const CellGeometry& geometry() const { return *geometry_; }
   /// Number of pixels whose ray hits a surface.
   size_t pixelsWithSurface() const { return hit_count_; }
 

@@ -6,6 +6,7 @@
 #include <memory>
 #include <vector>
 
+#include "cellsight/accuracy.hpp"
 #include "cellsight/line_extraction.hpp"
 #include "cellsight/renderer.hpp"
 #include "cellsight/scan_cloud.hpp"
@@ -44,5 +45,28 @@ ScanCloud simulateScan(const ScannerRenderer& renderer,
                        const std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>>& poses,
                        const ScannerCalibration& cal, const LineExtractionConfig& line,
                        const TriangulationConfig& tri, uint64_t seed, SimScanStats* stats = nullptr);
+
+/// Flange poses sweeping the light line across `target` (base frame) with the flange turned by
+/// `yaw` about the vertical from the robot's home orientation: the sheet's horizontal normal
+/// sets the sweep direction; ±half_span around the pose whose central beam hits the target
+/// height at the target, in `step` increments, flange at `flange_height`.
+std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> sweepAcross(
+    const Scene& scene, const Eigen::Vector3d& target, double yaw, double half_span, double step,
+    double flange_height);
+
+struct SphereAcceptance {
+  std::vector<SphereFit> fits;  ///< one per projector orientation
+  double mpe_p = 0;             ///< first orientation (one robot motion), metres
+  double mpe_p_worst = 0;       ///< worst of the K
+  double mpe_al = 0;            ///< diameter of the smallest sphere holding the K centres
+  Eigen::Vector3d true_center = Eigen::Vector3d::Zero();
+  double true_radius = 0;
+  std::vector<size_t> frames;
+};
+
+/// MPE_P and MPE_AL on a reference sphere object of the scene (K orientations 360°/K apart).
+SphereAcceptance sphereAcceptance(const ScannerRenderer& renderer, const SceneObject& sphere,
+                                  const ScannerCalibration& cal, const LineExtractionConfig& line,
+                                  const TriangulationConfig& tri, int K, double step, bool filter);
 
 }  // namespace cellsight

@@ -64,7 +64,7 @@ namespace {
 struct Ball {
   Eigen::Vector3d c;
   double r2;
-  bool contains(const Eigen::Vector3d& p) const { return (p - c).squaredNorm() <= r2 * (1 + 1e-12) + 1e-24; }
+  bool contains(const Eigen::Vector3d& p) const { return (p - c).squaredNorm() <= r2 * (1 + 1e-9) + 1e-30; }
 };
 
 bool circumsphere(const std::vector<Eigen::Vector3d>& s, Ball& out) {
@@ -95,9 +95,14 @@ bool circumsphere(const std::vector<Eigen::Vector3d>& s, Ball& out) {
 }
 }  // namespace
 
-double minimumEnclosingDiameter(const std::vector<Eigen::Vector3d>& pts) {
-  if (pts.empty()) return 0;
-  if (pts.size() == 1) return 0;
+double minimumEnclosingDiameter(const std::vector<Eigen::Vector3d>& input) {
+  if (input.size() < 2) return 0;
+  // Centred coordinates: the spheres here are tiny (µm) next to the coordinates (0.5 m).
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : input) mean += p;
+  mean /= static_cast<double>(input.size());
+  std::vector<Eigen::Vector3d> pts;
+  for (const auto& p : input) pts.push_back(p - mean);
   // Exhaustive over supports of 2..4 points: exact, fine for the K = 5 centres of MPE_AL.
   double best = 1e300;
   const int n = static_cast<int>(pts.size());

@@ -82,3 +82,70 @@ SurfaceErrorStats SurfaceDistance::stats(const std::vector<Eigen::Vector3d>& poi
 }
 
 }  // namespace cellsight
+
+namespace cellsight {
+
+LineCentreErrors lineCentreErrors(const ScannerRenderer& renderer, const Eigen::Isometry3d& T_base_flange,
+                                  const LineExtractionConfig& config, uint64_t seed) {
+  const Scene& scene = renderer.geometry().scene();
+  const CameraIntrinsics& K = scene.scanner_camera.intrinsics;
+  const Eigen::Isometry3d T_cam_base = scene.scanner_camera.T_base_camera.inverse();
+  // Sheet ∩ table: a point and direction in the base frame.
+  const Plane sheet = laserPlane(T_base_flange * scene.laser.T_flange_laser);
+  const Eigen::Vector3d dir = sheet.n.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d o = (T_base_flange * scene.laser.T_flange_laser).translation();
+  Eigen::Vector3d q(o.x(), o.y(), scene.table.z);
+  const Eigen::Vector3d in_plane(sheet.n.x(), sheet.n.y(), 0);
+  q -= sheet.distance(q) / in_plane.squaredNorm() * in_plane;
+  auto image = [&](double s) { return K.project(T_cam_base * (q + s * dir)); };
+  // Analytic centre at column u: bisection on s for image(s).x == u.
+  auto rowAt = [&](double u, double& v) {
+    double lo = -1.0, hi = 1.0;
+    const bool inc = image(hi).x() > image(lo).x();
+    for (int i = 0; i < 80; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      if ((image(mid).x() < u) == inc) lo = mid; else hi = mid;
+    }
+    v = image(0.5 * (lo + hi)).y();
+    return v >= 0 && v < K.height;
+  };
+  const cv::Mat img = renderer.render(T_base_flange, seed);
+  LineExtractionConfig c = config;
+  c.line_along_rows = true;
+  const auto pts = extractLine(img, c);
+  // The lit extent: columns where the noise-free laser is present.
+  const cv::Mat clean = renderer.renderLaserOnly(T_base_flange);
+  cv::Mat colmax;
+  cv::reduce(clean, colmax, 0, cv::REDUCE_MAX, CV_32F);
+  int first = -1, last = -1;
+  for (int u = 0; u < colmax.cols; ++u) {
+    if (colmax.at<float>(0, u) > 20.f) {
+      if (first < 0) first = u;
+      last = u;
+    }
+  }
+  LineCentreErrors e;
+  if (first < 0) return e;
+  const int margin = (last - first) / 10;
+  first += margin;
+  last -= margin;
+  e.expected = static_cast<size_t>(last - first + 1);
+  double s2 = 0, s1 = 0;
+  for (const auto& p : pts) {
+    if (p.u < first || p.u > last) continue;
+    double v;
+    if (!rowAt(p.u, v)) continue;
+    const double err = p.v - v;
+    s2 += err * err;
+    s1 += std::abs(err);
+    e.max_px = std::max(e.max_px, std::abs(err));
+    ++e.columns;
+  }
+  if (e.columns) {
+    e.rms_px = std::sqrt(s2 / static_cast<double>(e.columns));
+    e.mean_px = s1 / static_cast<double>(e.columns);
+  }
+  return e;
+}
+
+}  // namespace cellsight

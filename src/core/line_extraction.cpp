@@ -234,8 +234,9 @@ std::vector<LinePoint> extractLine(const cv::Mat& image, const LineExtractionCon
       case LineExtractionConfig::Estimator::kCentroid: {
         const int lo = std::max(0, a - c.centroid_margin), hi = std::min(H - 1, b + c.centroid_margin);
         float s = 0, sv = 0;
+        const float floor = bg + static_cast<float>(c.centroid_floor) * (peak - bg);
         for (int k = lo; k <= hi; ++k) {
-          const float w = std::max(0.f, at(k, u) - bg);
+          const float w = std::max(0.f, at(k, u) - floor);
           s += w;
           sv += w * k;
         }

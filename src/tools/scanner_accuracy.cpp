@@ -21,7 +21,6 @@
 #include "cellsight/trajectory.hpp"
 
 using namespace cellsight;
-using Poses = std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>>;
 
 namespace {
 
@@ -66,33 +65,6 @@ std::vector<Eigen::Vector3d> near(const ScanCloud& c, const Eigen::Vector3d& cen
   return out;
 }
 
-/// Flange poses sweeping the light line across `target` with the flange turned by `yaw` about
-/// the vertical: the sheet's horizontal normal sets the sweep direction.
-Poses sweepAcross(const Scene& s, const Eigen::Vector3d& target, double yaw, double half_span,
-                  double step, double flange_height) {
-  const Eigen::Isometry3d base_rot(s.robot.home.linear());
-  Eigen::Isometry3d F0 = Eigen::Isometry3d::Identity();
-  F0.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * base_rot.linear();
-  F0.translation() = Eigen::Vector3d(0, 0, flange_height);
-  const Eigen::Isometry3d L = F0 * s.laser.T_flange_laser;
-  // Where the central beam meets the horizontal plane through the target.
-  const Eigen::Vector3d e = L.translation(), z = L.linear().col(2);
-  const double t = (target.z() - e.z()) / z.z();
-  const Eigen::Vector3d hit = e + t * z;
-  Eigen::Vector3d sweep = L.linear().col(1);
-  sweep.z() = 0;
-  sweep.normalize();
-  Poses poses;
-  const int n = static_cast<int>(std::round(2 * half_span / step)) + 1;
-  for (int i = 0; i < n; ++i) {
-    const double sdist = -half_span + i * step;
-    Eigen::Isometry3d F = F0;
-    F.translation() += Eigen::Vector3d(target.x() - hit.x(), target.y() - hit.y(), 0) + sdist * sweep;
-    poses.push_back(F);
-  }
-  return poses;
-}
-
 nlohmann::json sphereJson(const SphereFit& f) {
   return {{"points", f.points},
           {"center_m", {f.center.x(), f.center.y(), f.center.z()}},
@@ -107,6 +79,8 @@ int runSim(const Args& a) {
   if (a.flag("no-noise")) scene.noise.enabled = false;
   LineExtractionConfig line;
   line.estimator = LineExtractionConfig::parseEstimator(a.get("estimator", "centroid"));
+  line.centroid_floor = std::stod(a.get("centroid-floor", std::to_string(line.centroid_floor)));
+  line.background_percentile = std::stod(a.get("background-percentile", std::to_string(line.background_percentile)));
   line.smoothing_degree = std::stoi(a.get("smoothing-degree", std::to_string(line.smoothing_degree)));
   TriangulationConfig tri;
   auto geometry = std::make_shared<CellGeometry>(scene);
@@ -149,40 +123,24 @@ int runSim(const Args& a) {
     if (o.model == a.get("sphere-model", "sphere25")) sphere = &o;
   }
   if (sphere) {
-    const TriangleMesh mesh = loadValidMesh(sphere->info.mesh_file);
-    const Eigen::Vector3d center = sphere->T_base_object * mesh.bounds().center().cast<double>();
-    const double radius = 0.5 * mesh.bounds().sizes().x();
     const int K = std::stoi(a.get("k", "5"));
     const double step = std::stod(a.get("sphere-step-mm", "0.5")) * 1e-3;
-    std::vector<Eigen::Vector3d> centres;
+    const SphereAcceptance acc = sphereAcceptance(renderer, *sphere, cal, line, tri, K, step, !a.flag("no-filter"));
     nlohmann::json scans = nlohmann::json::array();
-    double mpe_p = 0;
     for (int k = 0; k < K; ++k) {
-      const double yaw = 2 * M_PI * k / K;
-      const Poses poses = sweepAcross(scene, center, yaw, radius + 0.004, step, scene.robot.home.translation().z());
-      ScanCloud c = simulateScan(renderer, poses, cal, line, tri, scene.noise.seed + 100 + k);
-      if (!a.flag("no-filter")) c = statisticalOutlierRemoval(c, 20, 3.0);
-      // Sphere points: within 3 mm of the true surface region, above the table.
-      std::vector<Eigen::Vector3d> pts;
-      for (const auto& p : near(c, center, radius + 0.003)) {
-        if (p.z() > scene.table.z + 0.002) pts.push_back(p);
-      }
-      const SphereFit f = fitSphere(pts);
-      centres.push_back(f.center);
-      mpe_p = std::max(mpe_p, f.max_abs_dev);
-      nlohmann::json j = sphereJson(f);
-      j["yaw_deg"] = yaw * 180 / M_PI;
-      j["frames"] = poses.size();
-      j["center_error_mm"] = (f.center - center).norm() * 1e3;
+      nlohmann::json j = sphereJson(acc.fits[static_cast<size_t>(k)]);
+      j["yaw_deg"] = 360.0 * k / K;
+      j["frames"] = acc.frames[static_cast<size_t>(k)];
+      j["center_error_mm"] = (acc.fits[static_cast<size_t>(k)].center - acc.true_center).norm() * 1e3;
       scans.push_back(j);
     }
-    out["sphere"] = {{"true_center_m", {center.x(), center.y(), center.z()}},
-                     {"true_radius_mm", radius * 1e3},
+    out["sphere"] = {{"true_center_m", {acc.true_center.x(), acc.true_center.y(), acc.true_center.z()}},
+                     {"true_radius_mm", acc.true_radius * 1e3},
                      {"k", K},
                      {"scans", scans},
-                     {"mpe_p_mm", scans[0]["mpe_p_mm"]},
-                     {"mpe_p_worst_of_k_mm", mpe_p * 1e3},
-                     {"mpe_al_mm", minimumEnclosingDiameter(centres) * 1e3}};
+                     {"mpe_p_mm", acc.mpe_p * 1e3},
+                     {"mpe_p_worst_of_k_mm", acc.mpe_p_worst * 1e3},
+                     {"mpe_al_mm", acc.mpe_al * 1e3}};
   }
 
   // 3. Flatness of a bare table patch (in front of the parts).
@@ -207,7 +165,7 @@ int runSim(const Args& a) {
         }
       }
     }
-    const Poses poses = sweepAcross(scene, target, 0, 0.010, 0.001, scene.robot.home.translation().z());
+    const auto poses = sweepAcross(scene, target, 0, 0.010, 0.001, scene.robot.home.translation().z());
     ScanCloud c = simulateScan(renderer, poses, cal, line, tri, scene.noise.seed + 7);
     if (!a.flag("no-filter")) c = statisticalOutlierRemoval(c, 20, 3.0);
     std::vector<Eigen::Vector3d> pts;

@@ -1,0 +1,67 @@
+// Acceptance figures of issue 3 on the simulated demo cell (the same code paths as the
+// scanner_accuracy tool; figures in docs/scanner.md).
+#include <gtest/gtest.h>
+
+#include "cellsight/accuracy.hpp"
+#include "cellsight/evaluation.hpp"
+#include "cellsight/sim_scan.hpp"
+#include "cellsight/trajectory.hpp"
+
+using namespace cellsight;
+
+namespace {
+const std::string kRoot = CELLSIGHT_SOURCE_DIR;
+}
+
+TEST(ScannerAcceptance, LineCentreWithinFiveHundredthsOfAPixelAtDefaultNoise) {
+  Scene s = loadScene(kRoot + "/config/scenes/demo.yaml");
+  s.objects.clear();
+  ScannerRenderer r(std::make_shared<CellGeometry>(s));
+  LineExtractionConfig c;  // defaults: centroid + quadratic smoothing
+  double s2 = 0;
+  size_t n = 0;
+  for (int f = 0; f < 3; ++f) {
+    Eigen::Isometry3d F = s.robot.home;
+    F.translation().y() = -0.20 + 0.03 * f;
+    const LineCentreErrors e = lineCentreErrors(r, F, c, 77 + f);
+    EXPECT_GT(e.columns, 0.9 * e.expected);
+    s2 += e.rms_px * e.rms_px * e.columns;
+    n += e.columns;
+  }
+  const double rms = std::sqrt(s2 / n);
+  std::printf("line-centre RMS at default noise: %.4f px over %zu columns\n", rms, n);
+  EXPECT_LT(rms, 0.05);
+}
+
+TEST(ScannerAcceptance, NoiseFreeScanLiesOnTheTrueSurfaces) {
+  Scene s = loadScene(kRoot + "/config/scenes/demo.yaml");
+  s.noise.enabled = false;
+  ScannerRenderer r(std::make_shared<CellGeometry>(s));
+  const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
+  ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(s), {}, {}, 1);
+  const Eigen::AlignedBox3f ws(s.workspace.min().cast<float>() - Eigen::Vector3f::Constant(0.002f),
+                               s.workspace.max().cast<float>() + Eigen::Vector3f::Constant(0.002f));
+  cloud = statisticalOutlierRemoval(cropBox(cloud, ws), 20, 3.0);
+  std::vector<Eigen::Vector3d> pts;
+  for (const auto& p : cloud.points) pts.push_back(p.cast<double>());
+  const SurfaceErrorStats e = SurfaceDistance(s).stats(pts);
+  std::printf("noise-free surface error: RMS %.4f mm, p99 %.4f mm over %zu points\n", e.rms * 1e3,
+              e.p99 * 1e3, e.points);
+  EXPECT_GT(e.points, 100000u);
+  EXPECT_LT(e.rms, 0.02e-3);
+}
+
+TEST(ScannerAcceptance, ReferenceSphereProbingAndMultiOrientationErrors) {
+  const Scene s = loadScene(kRoot + "/config/scenes/demo.yaml");  // default noise model
+  ScannerRenderer r(std::make_shared<CellGeometry>(s));
+  const SceneObject* sphere = nullptr;
+  for (const auto& o : s.objects)
+    if (o.model == "sphere25") sphere = &o;
+  ASSERT_NE(sphere, nullptr);
+  const SphereAcceptance acc = sphereAcceptance(r, *sphere, ScannerCalibration::fromScene(s), {}, {}, 5, 0.5e-3, true);
+  std::printf("MPE_P %.4f mm (worst of 5: %.4f), MPE_AL %.4f mm\n", acc.mpe_p * 1e3, acc.mpe_p_worst * 1e3,
+              acc.mpe_al * 1e3);
+  for (const auto& f : acc.fits) EXPECT_GT(f.points, 1000u);
+  EXPECT_LT(acc.mpe_p, 0.15e-3);
+  EXPECT_LT(acc.mpe_al, 0.10e-3);
+}
