@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # make demo: install what is missing, build, run the simulated cell cycle headless.
 # Writes to <out>: images/ (captured frames), frames.json, truth/ (ground truth + true
-# calibration), raw.bag (images, camera_info, tf, I/O), rviz.png, report.json.
+# calibration), raw.bag (images, camera_info, tf, I/O), scan.ply, scanner.json, rviz.png,
+# report.json.
 # Usage: scripts/demo.sh [build folder] [out folder]
 set -euo pipefail
 BUILD=${1:-_build}
@@ -36,16 +37,16 @@ roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$OUT" rviz:
   >"$OUT/launch.log" 2>&1 &
 LAUNCH_PID=$!
 
-# camera_trigger writes frames.json when the trajectory is done.
+# scan_client writes scan_result.json when the Scan action has finished.
 deadline=$(( $(date +%s) + 600 ))
-while [ ! -f "$OUT/frames.json" ]; do
-  if ! kill -0 "$LAUNCH_PID" 2>/dev/null || grep -q "camera_trigger.*has died" "$OUT/launch.log"; then
+while [ ! -f "$OUT/scan_result.json" ]; do
+  if ! kill -0 "$LAUNCH_PID" 2>/dev/null || grep -qE "(camera_trigger|scan_client|triangulation|cell_sim).*has died" "$OUT/launch.log"; then
     echo "demo: FAILED: the scan did not complete; see $OUT/launch.log" >&2
     grep -E "ERROR|FATAL|died" "$OUT/launch.log" | tail -5 >&2 || true
     exit 1
   fi
   if [ "$(date +%s)" -gt "$deadline" ]; then
-    echo "demo: FAILED: no frames.json after 600 s; see $OUT/launch.log" >&2
+    echo "demo: FAILED: no scan result after 600 s; see $OUT/launch.log" >&2
     exit 1
   fi
   sleep 0.5
@@ -57,13 +58,47 @@ kill -INT "$LAUNCH_PID"
 wait "$LAUNCH_PID" || true
 LAUNCH_PID=""
 t5=$(now)
-cp "$ROS_LOG_DIR"/latest/camera_trigger*.log "$OUT/" 2>/dev/null || true
+if ! /usr/bin/python3 -c 'import json,sys; sys.exit(json.load(open(sys.argv[1]))["status"])' "$OUT/scan_result.json"; then
+  echo "demo: FAILED: the scan was aborted: $(cat "$OUT/scan_result.json")" >&2
+  exit 1
+fi
+# Scanner figures: the demo scan against the simulator's truth (+ K = 5 sphere sweeps, MPE_AL).
+"$CELLSIGHT_BUILD/devel/lib/cellsight/cellsight_scanner_accuracy" scan --scene config/scenes/demo.yaml \
+  --cloud "$OUT/scan.ply" --k 5 --json "$OUT/scanner_eval.json" >/dev/null
+t6=$(now)
 
-/usr/bin/python3 - "$OUT" "$t0" "$t1" "$t2" "$t3" "$t4" "$t5" <<'PY'
+/usr/bin/python3 - "$OUT" "$t0" "$t1" "$t2" "$t3" "$t4" "$t5" "$t6" <<'PY'
 import json, os, sys, subprocess
 import rosbag
 out = sys.argv[1]
-t0, t1, t2, t3, t4, t5 = map(float, sys.argv[2:8])
+t0, t1, t2, t3, t4, t5, t6 = map(float, sys.argv[2:9])
+
+def write_json(name, obj):
+    tmp = os.path.join(out, name + ".tmp")
+    with open(tmp, "w") as f:
+        json.dump(obj, f, indent=2)
+        f.write("\n")
+    os.replace(tmp, os.path.join(out, name))
+
+scan = json.load(open(os.path.join(out, "scan_result.json")))
+ev = json.load(open(os.path.join(out, "scanner_eval.json")))
+scanner = {
+    "points": ev["points"],
+    "frames": scan["frames"],
+    "scan_seconds": round(scan["scan_seconds"], 3),
+    "surface_error_rms_mm": ev["surface_error_rms_mm"],
+    "surface_error_max_mm": ev["surface_error_max_mm"],
+    "surface_error_p99_mm": ev["surface_error_p99_mm"],
+    "mpe_p_mm": ev.get("mpe_p_mm"),
+    "mpe_al_mm": ev.get("mpe_al_mm"),
+    "notes": {
+        "mpe_p_mm": "largest deviation from the least-squares sphere, reference sphere points of scan.ply",
+        "mpe_al_mm": ev.get("mpe_al_method"),
+        "surface_error": "distance of every scan.ply point to the nearest true surface of the scene",
+    },
+    "sphere_in_scan": ev.get("sphere_in_scan"),
+}
+write_json("scanner.json", scanner)
 frames = json.load(open(os.path.join(out, "frames.json")))
 bag_path = os.path.join(out, "raw.bag")
 topics = {}
@@ -74,7 +109,9 @@ sd = subprocess.run(["/usr/bin/convert", os.path.join(out, "rviz.png"), "-colors
                      "-format", "%[fx:standard_deviation]", "info:"],
                     capture_output=True, text=True).stdout.strip()
 report = {
-    "what_ran": ["cell_sim", "calibration_publisher", "camera_trigger", "rosbag record", "rviz (Xvfb)"],
+    "what_ran": ["cell_sim", "calibration_publisher", "laser_plane_tracker", "triangulation",
+                 "camera_trigger (Scan action)", "scan_client", "rosbag record", "rviz (Xvfb)",
+                 "cellsight_scanner_accuracy scan"],
     "scene": "config/scenes/demo.yaml",
     "trajectory": frames["trajectory"],
     "frames_planned": frames["poses"],
@@ -85,18 +122,17 @@ report = {
         "build": round(t2 - t1, 2),
         "launch_to_scan_done": round(t4 - t3, 2),
         "shutdown_and_screenshot": round(t5 - t4, 2),
-        "total": round(t5 - t0, 2),
+        "scanner_evaluation": round(t6 - t5, 2),
+        "total": round(t6 - t0, 2),
     },
     "bag": {"path": "raw.bag", "bytes": os.path.getsize(bag_path), "topics": topics},
     "rviz_png_grey_stddev": float(sd) if sd else None,
     "outputs": sorted(os.listdir(out)),
 }
-tmp = os.path.join(out, "report.json.tmp")
-with open(tmp, "w") as f:
-    json.dump(report, f, indent=2)
-    f.write("\n")
-os.replace(tmp, os.path.join(out, "report.json"))
+report["scanner"] = scanner
+write_json("report.json", report)
 print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds")}, indent=1))
+print(json.dumps({k: v for k, v in scanner.items() if k not in ("notes", "sphere_in_scan")}, indent=1))
 missing = [t for t in ("/scanner_camera/image_raw", "/scanner_camera/camera_info", "/tf", "/tf_static") if t not in topics]
 if len(frames["frames"]) != frames["poses"] or missing:
     print("demo: FAILED: frames %d/%d, topics missing from the bag: %s" % (len(frames["frames"]), frames["poses"], missing))

@@ -30,9 +30,10 @@ struct SimScanStats {
   double render_seconds = 0, process_seconds = 0;
 };
 
-/// Whether the laser line runs along image rows for a flange pose: the sheet's trace on the
-/// support plane (z = reference_z) projected into the image. Decides the extraction direction.
-bool lineAlongRows(const Eigen::Isometry3d& T_base_flange, const ScannerCalibration& cal);
+/// Whether the laser line runs along image rows: the sheet's trace on a surface facing the
+/// camera runs along n × z (camera frame), i.e. along u when |n_y| ≥ |n_x|. Decides the
+/// extraction direction (the same rule in the ROS node and in-process).
+bool lineAlongRows(const Plane& plane_camera);
 
 /// One frame: line → profile points in the base frame (appended to `cloud`). The extraction
 /// direction follows lineAlongRows() unless `auto_direction` is false.

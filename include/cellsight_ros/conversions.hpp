@@ -6,6 +6,7 @@
 #include <ros/time.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/PointCloud2.h>
 
 #include <Eigen/Geometry>
 #include <cstdint>
@@ -14,6 +15,7 @@
 #include "cellsight/calibration.hpp"
 #include "cellsight/camera_model.hpp"
 #include "cellsight/renderer.hpp"
+#include "cellsight/scan_cloud.hpp"
 #include "cellsight/LaserPlaneStamped.h"
 
 namespace cellsight_ros {
@@ -37,6 +39,12 @@ cellsight::CameraIntrinsics fromCameraInfo(const sensor_msgs::CameraInfo& msg);
 
 /// CV_8UC1 → mono8, CV_8UC3 (RGB order) → rgb8.
 sensor_msgs::Image toImageMsg(const cv::Mat& image, const std::string& frame, const ros::Time& stamp);
+
+/// x y z intensity [normal_x normal_y normal_z] (float32), unorganised, dense.
+sensor_msgs::PointCloud2 toCloudMsg(const cellsight::ScanCloud& cloud, const ros::Time& stamp);
+/// Reads x y z (required) and intensity / normals (optional); non-finite points are dropped
+/// and counted in `dropped`. Throws std::invalid_argument naming a missing field or bad layout.
+cellsight::ScanCloud fromCloudMsg(const sensor_msgs::PointCloud2& msg, size_t* dropped = nullptr);
 
 int64_t toNanoseconds(const ros::Time& t);
 ros::Time fromNanoseconds(int64_t ns);

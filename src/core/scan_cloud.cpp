@@ -105,7 +105,8 @@ void saveCloud(const std::string& path, const ScanCloud& cloud) {
   const std::string tmp = path + ".tmp";
   int rc = -1;
   if (path.size() > 4 && path.substr(path.size() - 4) == ".ply") {
-    rc = pcl::io::savePLYFileBinary(tmp, *pc);
+    pcl::PLYWriter writer;
+    rc = writer.write(tmp, *pc, Eigen::Vector4f::Zero(), Eigen::Quaternionf::Identity(), true, false);
   } else if (path.size() > 4 && path.substr(path.size() - 4) == ".pcd") {
     rc = pcl::io::savePCDFileBinary(tmp, *pc);
   } else {

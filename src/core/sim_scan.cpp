@@ -15,20 +15,8 @@ ScannerCalibration ScannerCalibration::fromScene(const Scene& s) {
   return c;
 }
 
-bool lineAlongRows(const Eigen::Isometry3d& T_base_flange, const ScannerCalibration& cal) {
-  const Plane sheet = laserPlane(T_base_flange * cal.T_flange_laser);
-  Eigen::Vector3d dir = sheet.n.cross(Eigen::Vector3d::UnitZ());
-  if (dir.norm() < 1e-6) return true;  // sheet parallel to the support plane: no trace
-  dir.normalize();
-  // A point on both planes: the sheet point closest to the laser origin's vertical foot.
-  const Eigen::Vector3d o = (T_base_flange * cal.T_flange_laser).translation();
-  Eigen::Vector3d q(o.x(), o.y(), cal.reference_z);
-  const Eigen::Vector3d in_plane = sheet.n - sheet.n.z() * Eigen::Vector3d::UnitZ();
-  q -= sheet.distance(q) / in_plane.squaredNorm() * in_plane;
-  const Eigen::Isometry3d T_cam_base = cal.T_base_camera.inverse();
-  const Eigen::Vector2d a = cal.intrinsics.project(T_cam_base * q);
-  const Eigen::Vector2d b = cal.intrinsics.project(T_cam_base * (q + 0.01 * dir));
-  return std::abs(b.x() - a.x()) >= std::abs(b.y() - a.y());
+bool lineAlongRows(const Plane& plane_camera) {
+  return std::abs(plane_camera.n.y()) >= std::abs(plane_camera.n.x());
 }
 
 void addProfile(const cv::Mat& image, const Eigen::Isometry3d& T_base_flange,
@@ -37,9 +25,9 @@ void addProfile(const cv::Mat& image, const Eigen::Isometry3d& T_base_flange,
                 bool auto_direction) {
   LineExtractionStats st;
   LineExtractionConfig lc = line;
-  if (auto_direction) lc.line_along_rows = lineAlongRows(T_base_flange, cal);
-  const auto pts = extractLine(image, lc, &st);
   const Plane plane = laserPlane(cal.T_base_camera.inverse() * T_base_flange * cal.T_flange_laser);
+  if (auto_direction) lc.line_along_rows = lineAlongRows(plane);
+  const auto pts = extractLine(image, lc, &st);
   const auto profile = cal.undistortion ? triangulate(pts, *cal.undistortion, plane, tri)
                                         : triangulate(pts, cal.intrinsics, plane, tri);
   for (const auto& pp : profile) {

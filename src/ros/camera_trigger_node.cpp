@@ -1,13 +1,17 @@
-// camera_trigger: the stop-and-go scan cycle of thesis §1 over the cell's digital I/O.
-// For each pose of a named trajectory: command the flange (robot/move_flange), wait for the
-// robot's "in position" output (io/in_position), take the camera frame it triggered, pair it
-// with the flange pose from tf at the image stamp, then acknowledge with io/capture_done so the
-// robot may move on. Frames (PNG) and their poses are written to ~save_dir.
+// camera_trigger: the Scan action. Stop-and-go (thesis §1, two digital signals): for each pose
+// command the flange (robot/move_flange), wait for the robot's "in position" output
+// (io/in_position), take the camera frame it triggered, pair it with the flange pose from tf at
+// the image stamp, acknowledge on io/capture_done so the robot may move on. Continuous mode
+// (not in the thesis): the robot moves through the poses while the camera free-runs; every
+// frame's flange pose is interpolated by tf at its stamp. At the end the triangulation node
+// finishes the cloud (scan/finish). Frames may also be saved as PNG with frames.json.
+#include <actionlib/server/simple_action_server.h>
 #include <cv_bridge/cv_bridge.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
 #include <std_msgs/Bool.h>
+#include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
@@ -17,7 +21,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "cellsight/FinishScan.h"
 #include "cellsight/MoveFlange.h"
+#include "cellsight/ScanAction.h"
 #include "cellsight/file_io.hpp"
 #include "cellsight/ground_truth.hpp"
 #include "cellsight/trajectory.hpp"
@@ -26,98 +32,253 @@
 
 namespace {
 
+using cellsight::ScanResult;
+using Poses = std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>>;
+
 class CameraTrigger {
  public:
-  CameraTrigger(ros::NodeHandle& nh, ros::NodeHandle& pnh) : tf_listener_(tf_buffer_) {
+  CameraTrigger(ros::NodeHandle& nh, ros::NodeHandle& pnh)
+      : nh_(nh), tf_listener_(tf_buffer_), server_(nh, "scan", false) {
     trajectory_file_ = cellsight_ros::requireParam<std::string>(
         pnh, "trajectory_file", "YAML of named trajectories, e.g. config/trajectories.yaml");
-    trajectory_name_ = cellsight_ros::requireParam<std::string>(
-        pnh, "trajectory", "name of the trajectory in ~trajectory_file to run");
+    trajectories_ = cellsight::loadTrajectories(trajectory_file_);  // validated at start-up
     cellsight_ros::param(pnh, "base_frame", base_frame_);
     cellsight_ros::param(pnh, "flange_frame", flange_frame_);
     cellsight_ros::param(pnh, "save_dir", save_dir_);
     cellsight_ros::param(pnh, "in_position_timeout", in_position_timeout_);
     cellsight_ros::param(pnh, "capture_timeout", capture_timeout_);
     cellsight_ros::param(pnh, "tf_timeout", tf_timeout_);
-    cellsight_ros::param(pnh, "exit_when_done", exit_when_done_);
-    const auto all = cellsight::loadTrajectories(trajectory_file_);
-    auto it = all.find(trajectory_name_);
-    if (it == all.end()) {
-      std::string names;
-      for (const auto& kv : all) names += " " + kv.first;
-      throw std::runtime_error("trajectory '" + trajectory_name_ + "' not in " + trajectory_file_ +
-                               " (has:" + names + ")");
-    }
-    trajectory_ = it->second;
-    if (!save_dir_.empty()) cellsight::makeDirs(save_dir_ + "/images");
+    cellsight_ros::param(pnh, "processing_timeout", processing_timeout_);
     move_client_ = nh.serviceClient<cellsight::MoveFlange>("robot/move_flange");
+    reset_client_ = nh.serviceClient<std_srvs::Trigger>("scan/reset");
+    finish_client_ = nh.serviceClient<cellsight::FinishScan>("scan/finish");
     capture_done_pub_ = nh.advertise<std_msgs::Bool>("io/capture_done", 10, true);
     in_position_sub_ = nh.subscribe("io/in_position", 10, &CameraTrigger::onInPosition, this);
     image_sub_ = nh.subscribe("scanner_camera/image_raw", 5, &CameraTrigger::onImage, this);
+    server_.registerGoalCallback([this] { onGoal(); });
+    server_.start();
+    ROS_INFO("camera_trigger: Scan action ready on %s (%zu named trajectories)",
+             nh.resolveName("scan").c_str(), trajectories_.size());
   }
-
-  /// Runs the whole cycle; returns the process exit code.
-  int run() {
-    if (!move_client_.waitForExistence(ros::Duration(30.0))) {
-      ROS_ERROR("camera_trigger: service %s did not appear in 30 s: is the robot driver (or "
-                "cell_sim) running?", move_client_.getService().c_str());
-      return 1;
-    }
-    const ros::WallTime t0 = ros::WallTime::now();
-    int captured = 0;
-    for (size_t i = 0; i < trajectory_.poses.size() && ros::ok(); ++i) {
-      cellsight::MoveFlange srv;
-      srv.request.target.header.frame_id = base_frame_;
-      srv.request.target.pose = cellsight_ros::toPoseMsg(trajectory_.poses[i]);
-      const ros::Time commanded = ros::Time::now();
-      {
-        std::lock_guard<std::mutex> lock(mutex_);
-        in_position_since_ = ros::Time(0);
-      }
-      if (!move_client_.call(srv)) {
-        ROS_ERROR("camera_trigger: call to %s failed (robot driver gone?)",
-                  move_client_.getService().c_str());
-        return 1;
-      }
-      if (srv.response.status != cellsight::MoveFlange::Response::OK) {
-        ROS_ERROR("camera_trigger: pose %zu rejected by the robot (status %d): %s", i,
-                  srv.response.status, srv.response.message.c_str());
-        return 1;
-      }
-      // Wait for the rising edge of "in position", then for the frame it triggered.
-      std::unique_lock<std::mutex> lock(mutex_);
-      const double wait_s = srv.response.expected_duration + in_position_timeout_;
-      if (!cv_.wait_for(lock, std::chrono::duration<double>(wait_s),
-                        [&] { return !in_position_since_.isZero() || !ros::ok(); }) ||
-          !ros::ok()) {
-        ROS_ERROR("camera_trigger: robot did not report io/in_position within %.1f s for pose "
-                  "%zu; check the robot program and the I/O wiring", wait_s, i);
-        return 1;
-      }
-      // The camera fires on the in-position edge, so its frame is stamped after the command.
-      if (!cv_.wait_for(lock, std::chrono::duration<double>(capture_timeout_), [&] {
-            return (last_image_ && last_image_->header.stamp > commanded) || !ros::ok();
-          }) || !ros::ok()) {
-        ROS_ERROR("camera_trigger: no image on %s within %.1f s of the in-position signal; is "
-                  "the camera's trigger input wired to the robot output?",
-                  image_sub_.getTopic().c_str(), capture_timeout_);
-        return 1;
-      }
-      sensor_msgs::ImageConstPtr image = last_image_;
-      lock.unlock();
-      if (storeFrame(image, static_cast<int>(i))) ++captured;
-      acknowledge();
-    }
-    const double seconds = (ros::WallTime::now() - t0).toSec();
-    writeIndex(seconds);
-    ROS_INFO("camera_trigger: trajectory '%s' done: %d of %zu frames captured in %.2f s",
-             trajectory_name_.c_str(), captured, trajectory_.poses.size(), seconds);
-    return captured == static_cast<int>(trajectory_.poses.size()) ? 0 : 1;
-  }
-
-  bool exitWhenDone() const { return exit_when_done_; }
 
  private:
+  void onGoal() {
+    auto goal = server_.acceptNewGoal();
+    ScanResult result;
+    try {
+      execute(*goal, result);
+    } catch (const std::exception& e) {
+      result.status = ScanResult::PROCESSING_FAILED;
+      result.message = e.what();
+    }
+    if (result.status == ScanResult::OK) {
+      ROS_INFO("camera_trigger: %s", result.message.c_str());
+      server_.setSucceeded(result, result.message);
+    } else {
+      ROS_ERROR("camera_trigger: scan aborted: %s", result.message.c_str());
+      server_.setAborted(result, result.message);
+    }
+  }
+
+  bool resolvePoses(const cellsight::ScanGoal& goal, Poses& poses, std::string& name, std::string& err) {
+    if (!goal.trajectory.empty()) {
+      auto it = trajectories_.find(goal.trajectory);
+      if (it == trajectories_.end()) {
+        err = "no trajectory '" + goal.trajectory + "' in " + trajectory_file_;
+        return false;
+      }
+      poses = it->second.poses;
+      name = goal.trajectory;
+      return true;
+    }
+    if (goal.poses.poses.empty()) {
+      err = "goal names no trajectory and lists no poses";
+      return false;
+    }
+    if (!goal.poses.header.frame_id.empty() && goal.poses.header.frame_id != base_frame_) {
+      err = "poses must be in '" + base_frame_ + "', not '" + goal.poses.header.frame_id + "'";
+      return false;
+    }
+    for (const auto& p : goal.poses.poses) {
+      try {
+        poses.push_back(cellsight_ros::fromPoseMsg(p));
+      } catch (const std::exception& e) {
+        err = std::string("invalid pose in goal: ") + e.what();
+        return false;
+      }
+    }
+    name = "goal poses";
+    return true;
+  }
+
+  void execute(const cellsight::ScanGoal& goal, ScanResult& result) {
+    Poses poses;
+    std::string name, err;
+    if (!resolvePoses(goal, poses, name, err)) {
+      result.status = ScanResult::INVALID_GOAL;
+      result.message = err;
+      return;
+    }
+    for (auto* c : {&move_client_}) {
+      if (!c->waitForExistence(ros::Duration(30.0))) {
+        result.status = ScanResult::ROBOT_TIMEOUT;
+        result.message = "service " + c->getService() + " did not appear in 30 s: is the robot driver (or cell_sim) running?";
+        return;
+      }
+    }
+    const bool processing = reset_client_.waitForExistence(ros::Duration(10.0)) && finish_client_.exists();
+    if (processing) {
+      std_srvs::Trigger t;
+      reset_client_.call(t);
+    } else {
+      ROS_WARN("camera_trigger: scan/reset and scan/finish not available: frames are captured but no cloud is made");
+    }
+    frames_ = nlohmann::json::array();
+    if (!save_dir_.empty()) cellsight::makeDirs(save_dir_ + "/images");
+    const ros::WallTime t0 = ros::WallTime::now();
+    uint32_t captured = 0;
+    const bool ok = goal.continuous ? runContinuous(poses, goal.speed_scale, result, captured)
+                                    : runStopAndGo(poses, result, captured);
+    result.frames = captured;
+    result.scan_seconds = (ros::WallTime::now() - t0).toSec();
+    writeIndex(name, poses.size(), result.scan_seconds);
+    if (!ok) return;
+    if (processing) {
+      cellsight::FinishScan fin;
+      fin.request.output_file = goal.output_file;
+      fin.request.expected_frames = captured;
+      fin.request.wait_frames_timeout = processing_timeout_;
+      if (!finish_client_.call(fin)) {
+        result.status = ScanResult::PROCESSING_FAILED;
+        result.message = "call to scan/finish failed (triangulation node gone?)";
+        return;
+      }
+      if (fin.response.status != cellsight::FinishScan::Response::OK) {
+        result.status = ScanResult::PROCESSING_FAILED;
+        result.message = fin.response.message;
+        return;
+      }
+      result.points = fin.response.points;
+      result.cloud = fin.response.cloud;
+      result.output_file = goal.output_file;
+    }
+    result.status = ScanResult::OK;
+    result.message = "'" + name + "': " + std::to_string(captured) + " frames, " +
+                     std::to_string(result.points) + " points in " + std::to_string(result.scan_seconds) + " s";
+  }
+
+  bool move(const Eigen::Isometry3d& pose, double speed_scale, ScanResult& result, double& expected) {
+    cellsight::MoveFlange srv;
+    srv.request.target.header.frame_id = base_frame_;
+    srv.request.target.pose = cellsight_ros::toPoseMsg(pose);
+    srv.request.speed_scale = speed_scale;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      in_position_since_ = ros::Time(0);
+    }
+    if (!move_client_.call(srv)) {
+      result.status = ScanResult::ROBOT_REJECTED;
+      result.message = "call to " + move_client_.getService() + " failed (robot driver gone?)";
+      return false;
+    }
+    if (srv.response.status != cellsight::MoveFlange::Response::OK) {
+      result.status = ScanResult::ROBOT_REJECTED;
+      result.message = "robot rejected the pose (status " + std::to_string(srv.response.status) + "): " + srv.response.message;
+      return false;
+    }
+    expected = srv.response.expected_duration;
+    return true;
+  }
+
+  bool waitInPosition(double expected, size_t index, ScanResult& result) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const double wait_s = expected + in_position_timeout_;
+    if (!cv_.wait_for(lock, std::chrono::duration<double>(wait_s),
+                      [&] { return !in_position_since_.isZero() || !ros::ok() || server_.isPreemptRequested(); }) ||
+        !ros::ok()) {
+      result.status = ScanResult::ROBOT_TIMEOUT;
+      result.message = "robot did not report io/in_position within " + std::to_string(wait_s) + " s for pose " +
+                       std::to_string(index) + "; check the robot program and the I/O wiring";
+      return false;
+    }
+    if (server_.isPreemptRequested()) {
+      result.status = ScanResult::ROBOT_TIMEOUT;
+      result.message = "scan preempted";
+      return false;
+    }
+    return true;
+  }
+
+  bool runStopAndGo(const Poses& poses, ScanResult& result, uint32_t& captured) {
+    cellsight::ScanFeedback fb;
+    fb.total = static_cast<uint32_t>(poses.size());
+    for (size_t i = 0; i < poses.size() && ros::ok(); ++i) {
+      const ros::Time commanded = ros::Time::now();
+      double expected = 0;
+      if (!move(poses[i], 1.0, result, expected) || !waitInPosition(expected, i, result)) return false;
+      // The camera fires on the in-position edge, so its frame is stamped after the command.
+      sensor_msgs::ImageConstPtr image;
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        if (!cv_.wait_for(lock, std::chrono::duration<double>(capture_timeout_), [&] {
+              return (last_image_ && last_image_->header.stamp > commanded) || !ros::ok();
+            }) || !ros::ok()) {
+          result.status = ScanResult::CAMERA_TIMEOUT;
+          result.message = "no image on " + image_sub_.getTopic() + " within " + std::to_string(capture_timeout_) +
+                           " s of the in-position signal; is the camera's trigger input wired to the robot output?";
+          return false;
+        }
+        image = last_image_;
+      }
+      if (storeFrame(image, static_cast<int>(i))) ++captured;
+      acknowledge();
+      fb.done = static_cast<uint32_t>(i + 1);
+      server_.publishFeedback(fb);
+    }
+    return true;
+  }
+
+  bool runContinuous(const Poses& poses, double speed_scale, ScanResult& result, uint32_t& captured) {
+    if (speed_scale <= 0 || speed_scale > 1) speed_scale = 0.1;
+    double expected = 0;
+    if (!move(poses.front(), 1.0, result, expected) || !waitInPosition(expected, 0, result)) return false;
+    acknowledge();
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      recording_ = true;
+      recorded_.clear();
+    }
+    cellsight::ScanFeedback fb;
+    fb.total = static_cast<uint32_t>(poses.size());
+    for (size_t i = 1; i < poses.size(); ++i) {
+      if (!move(poses[i], speed_scale, result, expected) || !waitInPosition(expected, i, result)) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        recording_ = false;
+        return false;
+      }
+      acknowledge();
+      fb.done = static_cast<uint32_t>(i + 1);
+      server_.publishFeedback(fb);
+    }
+    ros::WallDuration(0.2).sleep();  // the last frame in flight
+    std::vector<sensor_msgs::ImageConstPtr> frames;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      recording_ = false;
+      frames.swap(recorded_);
+    }
+    if (frames.empty()) {
+      result.status = ScanResult::CAMERA_TIMEOUT;
+      result.message = "no frames arrived while the robot moved: is the camera free-running?";
+      return false;
+    }
+    for (size_t i = 0; i < frames.size(); ++i) {
+      if (storeFrame(frames[i], static_cast<int>(i))) ++captured;
+    }
+    // Frames arrived before recording started are processed too; count what the tracker sees.
+    return true;
+  }
+
   void onInPosition(const std_msgs::Bool::ConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (msg->data && !in_position_) in_position_since_ = ros::Time::now();
@@ -128,6 +289,7 @@ class CameraTrigger {
   void onImage(const sensor_msgs::ImageConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);
     last_image_ = msg;
+    if (recording_) recorded_.push_back(msg);
     cv_.notify_all();
   }
 
@@ -143,12 +305,10 @@ class CameraTrigger {
   bool storeFrame(const sensor_msgs::ImageConstPtr& image, int index) {
     geometry_msgs::TransformStamped T;
     try {
-      T = tf_buffer_.lookupTransform(base_frame_, flange_frame_, image->header.stamp,
-                                     ros::Duration(tf_timeout_));
+      T = tf_buffer_.lookupTransform(base_frame_, flange_frame_, image->header.stamp, ros::Duration(tf_timeout_));
     } catch (const tf2::TransformException& e) {
-      ROS_ERROR("camera_trigger: frame %d dropped: no %s -> %s at the image stamp %.6f: %s",
-                index, base_frame_.c_str(), flange_frame_.c_str(), image->header.stamp.toSec(),
-                e.what());
+      ROS_ERROR("camera_trigger: frame %d dropped: no %s -> %s at the image stamp %.6f: %s", index,
+                base_frame_.c_str(), flange_frame_.c_str(), image->header.stamp.toSec(), e.what());
       return false;
     }
     nlohmann::json entry;
@@ -163,8 +323,7 @@ class CameraTrigger {
       try {
         cv = cv_bridge::toCvShare(image);
       } catch (const cv_bridge::Exception& e) {
-        ROS_ERROR("camera_trigger: frame %d has an unusable encoding '%s': %s", index,
-                  image->encoding.c_str(), e.what());
+        ROS_ERROR("camera_trigger: frame %d has an unusable encoding '%s': %s", index, image->encoding.c_str(), e.what());
         return false;
       }
       cv::Mat out = cv->image;
@@ -181,24 +340,25 @@ class CameraTrigger {
     return true;
   }
 
-  void writeIndex(double seconds) {
+  void writeIndex(const std::string& name, size_t poses, double seconds) {
     if (save_dir_.empty()) return;
     nlohmann::json j;
-    j["trajectory"] = trajectory_name_;
-    j["poses"] = trajectory_.poses.size();
+    j["trajectory"] = name;
+    j["poses"] = poses;
     j["frames"] = frames_;
     j["scan_seconds"] = seconds;
     cellsight::writeFileAtomic(save_dir_ + "/frames.json", j.dump(2) + "\n");
   }
 
+  ros::NodeHandle nh_;
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_;
-  std::string trajectory_file_, trajectory_name_, save_dir_;
+  actionlib::SimpleActionServer<cellsight::ScanAction> server_;
+  std::string trajectory_file_, save_dir_;
+  std::map<std::string, cellsight::Trajectory> trajectories_;
   std::string base_frame_ = "base_link", flange_frame_ = "flange";
-  double in_position_timeout_ = 5.0, capture_timeout_ = 3.0, tf_timeout_ = 0.5;
-  bool exit_when_done_ = true;
-  cellsight::Trajectory trajectory_;
-  ros::ServiceClient move_client_;
+  double in_position_timeout_ = 5.0, capture_timeout_ = 3.0, tf_timeout_ = 0.5, processing_timeout_ = 30.0;
+  ros::ServiceClient move_client_, reset_client_, finish_client_;
   ros::Publisher capture_done_pub_;
   ros::Subscriber in_position_sub_, image_sub_;
   std::mutex mutex_;
@@ -206,6 +366,8 @@ class CameraTrigger {
   bool in_position_ = false;
   ros::Time in_position_since_;
   sensor_msgs::ImageConstPtr last_image_;
+  bool recording_ = false;
+  std::vector<sensor_msgs::ImageConstPtr> recorded_;
   nlohmann::json frames_ = nlohmann::json::array();
 };
 
@@ -214,17 +376,15 @@ class CameraTrigger {
 int main(int argc, char** argv) {
   ros::init(argc, argv, "camera_trigger");
   ros::NodeHandle nh, pnh("~");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  int rc = 0;
   try {
+    // The goal callback runs the whole scan; other callbacks need threads of their own.
+    ros::AsyncSpinner spinner(3);
     CameraTrigger trigger(nh, pnh);
-    rc = trigger.run();
-    if (!trigger.exitWhenDone()) ros::waitForShutdown();
+    spinner.start();
+    ros::waitForShutdown();
   } catch (const std::exception& e) {
-    ROS_FATAL("camera_trigger: %s", e.what());
-    rc = 1;
+    ROS_FATAL("camera_trigger cannot start: %s", e.what());
+    return 1;
   }
-  ros::shutdown();
-  return rc;
+  return 0;
 }

@@ -8,6 +8,7 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <memory>
@@ -30,6 +31,9 @@ class CellSim {
     std::string scene_file = cellsight_ros::requireParam<std::string>(
         pnh, "scene", "path of the scene YAML, e.g. $(find cellsight)/config/scenes/demo.yaml");
     cellsight::Scene scene = cellsight::loadScene(scene_file);
+    double scanner_rate = -1.0;
+    cellsight_ros::param(pnh, "scanner_frame_rate", scanner_rate);
+    if (scanner_rate >= 0) scene.scanner_camera.frame_rate = scanner_rate;
     bool noise = scene.noise.enabled;
     cellsight_ros::param(pnh, "noise", noise);
     scene.noise.enabled = noise;
@@ -132,24 +136,30 @@ class CellSim {
     if (msg->data) awaiting_capture_ = false;
   }
 
+  /// The flange pose at time t of the current motion (mutex_ held).
+  Eigen::Isometry3d poseAt(const ros::Time& t) const {
+    if (!moving_) return pose_;
+    const double a = duration_ > 0 ? std::clamp((t - move_start_).toSec() / duration_, 0.0, 1.0) : 1.0;
+    const Eigen::Quaterniond q0(start_pose_.linear()), q1(target_pose_.linear());
+    Eigen::Isometry3d p = Eigen::Isometry3d::Identity();
+    p.linear() = q0.slerp(a, q1).toRotationMatrix();
+    p.translation() = (1 - a) * start_pose_.translation() + a * target_pose_.translation();
+    return p;
+  }
+
   void onTick(const ros::TimerEvent&) {
     std::unique_lock<std::mutex> lock(mutex_);
     const ros::Time now = ros::Time::now();
     bool arrived = false;
     if (moving_) {
-      const double t = (now - move_start_).toSec();
-      const double a = duration_ > 0 ? std::min(1.0, t / duration_) : 1.0;
-      const Eigen::Quaterniond q0(start_pose_.linear()), q1(target_pose_.linear());
-      pose_.linear() = q0.slerp(a, q1).toRotationMatrix();
-      pose_.translation() =
-          (1 - a) * start_pose_.translation() + a * target_pose_.translation();
-      if (t >= duration_ + geometry_->scene().robot.settle_time) {
+      pose_ = poseAt(now);
+      if ((now - move_start_).toSec() >= duration_ + geometry_->scene().robot.settle_time) {
         pose_ = target_pose_;
         moving_ = false;
         arrived = true;
       }
     }
-    publishFlange(now);
+    publishFlange(now, pose_);
     if (arrived) {
       awaiting_capture_ = true;
       setInPosition(true);
@@ -161,21 +171,26 @@ class CellSim {
     }
   }
 
-  void publishFlange(const ros::Time& stamp) {
+  void publishFlange(const ros::Time& stamp, const Eigen::Isometry3d& pose) {
+    if (stamp == last_tf_stamp_) return;  // tf2 rejects a repeated stamp
+    last_tf_stamp_ = stamp;
     const cellsight::Scene& s = geometry_->scene();
     geometry_msgs::TransformStamped ts;
     ts.header.stamp = stamp;
     ts.header.frame_id = s.base_frame;
     ts.child_frame_id = s.flange_frame;
-    ts.transform = cellsight_ros::toTransformMsg(pose_);
+    ts.transform = cellsight_ros::toTransformMsg(pose);
     tf_.sendTransform(ts);
   }
 
   void capture(const ros::Time& stamp) {
+    std::lock_guard<std::mutex> capture_lock(capture_mutex_);
     Eigen::Isometry3d pose;
     {
+      // The pose at the exposure stamp, also sent to tf with that stamp (continuous scans).
       std::lock_guard<std::mutex> lock(mutex_);
-      pose = pose_;
+      pose = poseAt(stamp);
+      publishFlange(stamp, pose);
     }
     const cellsight::Scene& s = geometry_->scene();
     const auto t0 = std::chrono::steady_clock::now();
@@ -304,9 +319,9 @@ class CellSim {
   ros::Subscriber capture_done_sub_;
   ros::ServiceServer move_srv_;
   ros::Timer tf_timer_, fixture_timer_, scanner_timer_;
-  std::mutex mutex_;
+  std::mutex mutex_, capture_mutex_;
   Eigen::Isometry3d pose_, start_pose_, target_pose_;
-  ros::Time move_start_;
+  ros::Time move_start_, last_tf_stamp_;
   double duration_ = 0;
   bool moving_ = false;
   bool awaiting_capture_ = false;
@@ -321,7 +336,9 @@ int main(int argc, char** argv) {
   ros::NodeHandle nh, pnh("~");
   try {
     CellSim sim(nh, pnh);
-    ros::spin();
+    ros::AsyncSpinner spinner(2);  // rendering must not stall the flange tf
+    spinner.start();
+    ros::waitForShutdown();
   } catch (const std::exception& e) {
     ROS_FATAL("cell_sim cannot start: %s", e.what());
     return 1;

@@ -1,6 +1,7 @@
 #include "cellsight_ros/conversions.hpp"
 
 #include <sensor_msgs/image_encodings.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 
 #include <cmath>
 #include <stdexcept>
@@ -143,6 +144,85 @@ sensor_msgs::Image toImageMsg(const cv::Mat& image, const std::string& frame,
     std::memcpy(&m.data[static_cast<size_t>(r) * m.step], image.ptr(r), m.step);
   }
   return m;
+}
+
+sensor_msgs::PointCloud2 toCloudMsg(const cellsight::ScanCloud& c, const ros::Time& stamp) {
+  sensor_msgs::PointCloud2 m;
+  m.header.frame_id = c.frame_id;
+  m.header.stamp = stamp;
+  sensor_msgs::PointCloud2Modifier mod(m);
+  const bool normals = c.normals.size() == c.points.size() && !c.points.empty();
+  if (normals) {
+    mod.setPointCloud2Fields(7, "x", 1, sensor_msgs::PointField::FLOAT32, "y", 1,
+                             sensor_msgs::PointField::FLOAT32, "z", 1, sensor_msgs::PointField::FLOAT32,
+                             "intensity", 1, sensor_msgs::PointField::FLOAT32, "normal_x", 1,
+                             sensor_msgs::PointField::FLOAT32, "normal_y", 1,
+                             sensor_msgs::PointField::FLOAT32, "normal_z", 1, sensor_msgs::PointField::FLOAT32);
+  } else {
+    mod.setPointCloud2Fields(4, "x", 1, sensor_msgs::PointField::FLOAT32, "y", 1,
+                             sensor_msgs::PointField::FLOAT32, "z", 1, sensor_msgs::PointField::FLOAT32,
+                             "intensity", 1, sensor_msgs::PointField::FLOAT32);
+  }
+  mod.resize(c.points.size());
+  m.height = 1;
+  m.width = static_cast<uint32_t>(c.points.size());
+  m.is_dense = true;
+  if (c.points.empty()) return m;
+  sensor_msgs::PointCloud2Iterator<float> x(m, "x"), i(m, "intensity");
+  for (size_t k = 0; k < c.points.size(); ++k, ++x, ++i) {
+    x[0] = c.points[k].x();
+    x[1] = c.points[k].y();
+    x[2] = c.points[k].z();
+    *i = k < c.intensity.size() ? c.intensity[k] : 0.f;
+  }
+  if (normals) {
+    sensor_msgs::PointCloud2Iterator<float> n(m, "normal_x");
+    for (size_t k = 0; k < c.points.size(); ++k, ++n) {
+      n[0] = c.normals[k].x();
+      n[1] = c.normals[k].y();
+      n[2] = c.normals[k].z();
+    }
+  }
+  return m;
+}
+
+cellsight::ScanCloud fromCloudMsg(const sensor_msgs::PointCloud2& m, size_t* dropped) {
+  auto has = [&](const std::string& name) {
+    for (const auto& f : m.fields)
+      if (f.name == name) return f.datatype == sensor_msgs::PointField::FLOAT32;
+    return false;
+  };
+  for (const char* f : {"x", "y", "z"}) {
+    if (!has(f)) throw std::invalid_argument(std::string("PointCloud2 has no float32 field '") + f + "'");
+  }
+  if (static_cast<size_t>(m.row_step) * m.height > m.data.size() || m.point_step * m.width > m.row_step) {
+    throw std::invalid_argument("PointCloud2 data is shorter than width x height x point_step");
+  }
+  cellsight::ScanCloud c;
+  c.frame_id = m.header.frame_id;
+  const bool intensity = has("intensity"), normals = has("normal_x") && has("normal_y") && has("normal_z");
+  sensor_msgs::PointCloud2ConstIterator<float> x(m, "x");
+  std::unique_ptr<sensor_msgs::PointCloud2ConstIterator<float>> it, nt;
+  if (intensity) it.reset(new sensor_msgs::PointCloud2ConstIterator<float>(m, "intensity"));
+  if (normals) nt.reset(new sensor_msgs::PointCloud2ConstIterator<float>(m, "normal_x"));
+  size_t bad = 0;
+  const size_t n = static_cast<size_t>(m.width) * m.height;
+  for (size_t k = 0; k < n; ++k, ++x) {
+    const Eigen::Vector3f p(x[0], x[1], x[2]);
+    const float i = intensity ? **it : 0.f;
+    Eigen::Vector3f nn = Eigen::Vector3f::Zero();
+    if (normals) nn = Eigen::Vector3f((*nt)[0], (*nt)[1], (*nt)[2]);
+    if (intensity) ++(*it);
+    if (normals) ++(*nt);
+    if (!p.allFinite()) {
+      ++bad;
+      continue;
+    }
+    c.append(p, i);
+    if (normals) c.normals.push_back(nn);
+  }
+  if (dropped) *dropped = bad;
+  return c;
 }
 
 int64_t toNanoseconds(const ros::Time& t) { return static_cast<int64_t>(t.toNSec()); }

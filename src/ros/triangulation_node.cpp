@@ -1,0 +1,244 @@
+// triangulation: scanner images + the light sheet at their stamps → one profile per frame
+// (scan/profile, base frame) and the accumulated scan. scan/finish applies the statistical
+// outlier filter, the workspace crop and normals, saves PLY/PCD and publishes scan/cloud.
+#include <cv_bridge/cv_bridge.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/time_synchronizer.h>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/image_encodings.h>
+#include <std_srvs/Trigger.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <condition_variable>
+#include <mutex>
+
+#include "cellsight/FinishScan.h"
+#include "cellsight/scan_cloud.hpp"
+#include "cellsight/sim_scan.hpp"
+#include "cellsight/triangulation.hpp"
+#include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/params.hpp"
+
+namespace {
+
+namespace enc = sensor_msgs::image_encodings;
+
+class Triangulation {
+ public:
+  Triangulation(ros::NodeHandle& nh, ros::NodeHandle& pnh)
+      : listener_(buffer_), image_sub_(nh, "scanner_camera/image_raw", 10),
+        plane_sub_(nh, "scan/laser_plane", 10), sync_(image_sub_, plane_sub_, 20) {
+    line_ = cellsight_ros::loadLineConfig(pnh);
+    tri_ = cellsight_ros::loadTriangulationConfig(pnh);
+    cellsight_ros::param(pnh, "base_frame", base_frame_);
+    cellsight_ros::param(pnh, "outlier_k", outlier_k_);
+    cellsight_ros::param(pnh, "outlier_std", outlier_std_);
+    cellsight_ros::param(pnh, "normal_k", normal_k_);
+    std::vector<double> lo, hi;
+    if (pnh.getParam("workspace_min", lo) && pnh.getParam("workspace_max", hi)) {
+      if (lo.size() != 3 || hi.size() != 3) throw std::runtime_error("~workspace_min/max need 3 numbers (m)");
+      workspace_ = Eigen::AlignedBox3f(Eigen::Vector3f(lo[0], lo[1], lo[2]), Eigen::Vector3f(hi[0], hi[1], hi[2]));
+      has_workspace_ = true;
+    }
+    info_sub_ = nh.subscribe("scanner_camera/camera_info", 5, &Triangulation::onInfo, this);
+    sync_.registerCallback(&Triangulation::onFrame, this);
+    profile_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/profile", 20);
+    cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/cloud", 1, true);
+    reset_srv_ = nh.advertiseService("scan/reset", &Triangulation::onReset, this);
+    finish_srv_ = nh.advertiseService("scan/finish", &Triangulation::onFinish, this);
+  }
+
+ private:
+  void onInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
+    cellsight::CameraIntrinsics K;
+    try {
+      K = cellsight_ros::fromCameraInfo(*msg);
+    } catch (const std::exception& e) {
+      ROS_ERROR_THROTTLE(5.0, "triangulation: unusable camera_info: %s", e.what());
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (map_ && map_->camera().fx == K.fx && map_->camera().fy == K.fy && map_->camera().cx == K.cx &&
+        map_->camera().cy == K.cy && map_->camera().dist == K.dist && map_->camera().width == K.width &&
+        map_->camera().height == K.height)
+      return;
+    map_ = std::make_shared<cellsight::UndistortionMap>(K);
+    ROS_INFO("triangulation: camera intrinsics %dx%d fx %.1f from camera_info", K.width, K.height, K.fx);
+  }
+
+  void onFrame(const sensor_msgs::ImageConstPtr& image, const cellsight::LaserPlaneStampedConstPtr& plane_msg) {
+    try {
+      processFrame(image, plane_msg);
+    } catch (const std::exception& e) {
+      ROS_ERROR_THROTTLE(2.0, "triangulation: frame at %.6f dropped: %s", image->header.stamp.toSec(), e.what());
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++frames_;
+    cv_.notify_all();
+  }
+
+  void processFrame(const sensor_msgs::ImageConstPtr& image, const cellsight::LaserPlaneStampedConstPtr& plane_msg) {
+    std::shared_ptr<const cellsight::UndistortionMap> map;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      map = map_;
+    }
+    if (!map) {
+      ROS_WARN_THROTTLE(5.0, "triangulation: no camera_info yet on scanner_camera/camera_info: frames are dropped");
+      return;
+    }
+    if (static_cast<int>(image->width) != map->camera().width || static_cast<int>(image->height) != map->camera().height) {
+      ROS_ERROR_THROTTLE(5.0, "triangulation: image %ux%u does not match camera_info %dx%d: frame dropped",
+                         image->width, image->height, map->camera().width, map->camera().height);
+      return;
+    }
+    if (plane_msg->header.frame_id != image->header.frame_id) {
+      ROS_ERROR_THROTTLE(5.0, "triangulation: laser plane in '%s' but image in '%s': frame dropped",
+                         plane_msg->header.frame_id.c_str(), image->header.frame_id.c_str());
+      return;
+    }
+    cellsight::LineExtractionConfig lc = line_;
+    cv::Mat img;
+    if (image->encoding == enc::MONO8) {
+      img = cv_bridge::toCvShare(image)->image;
+      lc.channel = -1;
+    } else if (image->encoding == enc::RGB8 || image->encoding == enc::BGR8) {
+      img = cv_bridge::toCvShare(image)->image;
+      if (lc.channel < 0) lc.channel = 0;  // red laser by default
+      if (image->encoding == enc::BGR8) lc.channel = 2 - lc.channel;
+    } else {
+      ROS_ERROR_THROTTLE(5.0, "triangulation: encoding '%s' is not supported (mono8, rgb8, bgr8): frame dropped",
+                         image->encoding.c_str());
+      return;
+    }
+    geometry_msgs::TransformStamped T;
+    try {
+      T = buffer_.lookupTransform(base_frame_, image->header.frame_id, image->header.stamp, ros::Duration(0.2));
+    } catch (const tf2::TransformException& e) {
+      ROS_ERROR_THROTTLE(2.0, "triangulation: frame at %.6f dropped: no %s -> %s at its stamp: %s",
+                         image->header.stamp.toSec(), base_frame_.c_str(), image->header.frame_id.c_str(), e.what());
+      return;
+    }
+    const Eigen::Isometry3d T_base_camera = cellsight_ros::fromTransformMsg(T.transform);
+    const cellsight::Plane plane = cellsight_ros::fromPlaneMsg(*plane_msg);
+    // The sheet's trace on the image decides the search direction (rows or columns).
+    lc.line_along_rows = cellsight::lineAlongRows(plane);
+    cellsight::LineExtractionStats st;
+    const auto pts = cellsight::extractLine(img, lc, &st);
+    const auto prof = cellsight::triangulate(pts, *map, plane, tri_);
+    cellsight::ScanCloud profile;
+    profile.frame_id = base_frame_;
+    for (const auto& p : prof) profile.append((T_base_camera * p.p).cast<float>(), p.intensity);
+    profile_pub_.publish(cellsight_ros::toCloudMsg(profile, image->header.stamp));
+    if (pts.empty()) {
+      ROS_DEBUG("triangulation: no line in frame %.6f (%d columns without a line, %d ambiguous)",
+                image->header.stamp.toSec(), st.no_line, st.ambiguous);
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    camera_center_ = T_base_camera.translation().cast<float>();
+    for (size_t i = 0; i < profile.size(); ++i) scan_.append(profile.points[i], profile.intensity[i]);
+  }
+
+  bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    scan_ = cellsight::ScanCloud();
+    scan_.frame_id = base_frame_;
+    frames_ = 0;
+    res.success = true;
+    res.message = "scan cleared";
+    return true;
+  }
+
+  bool onFinish(cellsight::FinishScan::Request& req, cellsight::FinishScan::Response& res) {
+    cellsight::ScanCloud cloud;
+    Eigen::Vector3f viewpoint;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      if (req.expected_frames > 0) {
+        const double wait = req.wait_frames_timeout > 0 ? req.wait_frames_timeout : 10.0;
+        if (!cv_.wait_for(lock, std::chrono::duration<double>(wait),
+                          [&] { return frames_ >= req.expected_frames; })) {
+          res.status = cellsight::FinishScan::Response::TIMEOUT;
+          res.message = "only " + std::to_string(frames_) + " of " + std::to_string(req.expected_frames) +
+                        " frames arrived with a laser plane within " + std::to_string(wait) +
+                        " s (is laser_plane_tracker running, and tf complete?)";
+          res.frames = frames_;
+          return true;
+        }
+      }
+      cloud = scan_;
+      viewpoint = camera_center_;
+      res.frames = frames_;
+    }
+    cloud.frame_id = base_frame_;
+    if (has_workspace_) cloud = cellsight::cropBox(cloud, workspace_);
+    if (outlier_k_ > 0) cloud = cellsight::statisticalOutlierRemoval(cloud, outlier_k_, outlier_std_);
+    if (cloud.size() == 0) {
+      res.status = cellsight::FinishScan::Response::EMPTY;
+      res.message = "the scan is empty: no laser line was found in any frame";
+      return true;
+    }
+    if (normal_k_ > 0 && cloud.size() > static_cast<size_t>(normal_k_)) {
+      cellsight::estimateNormals(cloud, normal_k_, viewpoint);
+    }
+    res.cloud = cellsight_ros::toCloudMsg(cloud, ros::Time::now());
+    res.points = static_cast<uint32_t>(cloud.size());
+    cloud_pub_.publish(res.cloud);
+    if (!req.output_file.empty()) {
+      try {
+        cellsight::saveCloud(req.output_file, cloud);
+      } catch (const std::exception& e) {
+        res.status = cellsight::FinishScan::Response::SAVE_FAILED;
+        res.message = e.what();
+        return true;
+      }
+    }
+    res.status = cellsight::FinishScan::Response::OK;
+    res.message = "scan of " + std::to_string(res.points) + " points from " + std::to_string(res.frames) + " frames";
+    ROS_INFO("triangulation: %s%s%s", res.message.c_str(), req.output_file.empty() ? "" : ", saved to ",
+             req.output_file.c_str());
+    return true;
+  }
+
+  cellsight::LineExtractionConfig line_;
+  cellsight::TriangulationConfig tri_;
+  std::string base_frame_ = "base_link";
+  int outlier_k_ = 20;
+  double outlier_std_ = 3.0;
+  int normal_k_ = 15;
+  bool has_workspace_ = false;
+  Eigen::AlignedBox3f workspace_;
+  tf2_ros::Buffer buffer_;
+  tf2_ros::TransformListener listener_;
+  message_filters::Subscriber<sensor_msgs::Image> image_sub_;
+  message_filters::Subscriber<cellsight::LaserPlaneStamped> plane_sub_;
+  message_filters::TimeSynchronizer<sensor_msgs::Image, cellsight::LaserPlaneStamped> sync_;
+  ros::Subscriber info_sub_;
+  ros::Publisher profile_pub_, cloud_pub_;
+  ros::ServiceServer reset_srv_, finish_srv_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::shared_ptr<const cellsight::UndistortionMap> map_;
+  cellsight::ScanCloud scan_;
+  uint32_t frames_ = 0;
+  Eigen::Vector3f camera_center_ = Eigen::Vector3f::Zero();
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "triangulation");
+  ros::NodeHandle nh, pnh("~");
+  try {
+    Triangulation node(nh, pnh);
+    ros::AsyncSpinner spinner(3);
+    spinner.start();
+    ros::waitForShutdown();
+  } catch (const std::exception& e) {
+    ROS_FATAL("triangulation cannot start: %s", e.what());
+    return 1;
+  }
+  return 0;
+}
