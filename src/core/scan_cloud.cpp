@@ -106,7 +106,7 @@ void saveCloud(const std::string& path, const ScanCloud& cloud) {
   int rc = -1;
   if (path.size() > 4 && path.substr(path.size() - 4) == ".ply") {
     pcl::PLYWriter writer;
-    rc = writer.write(tmp, *pc, Eigen::Vector4f::Zero(), Eigen::Quaternionf::Identity(), true, false);
+    rc = writer.write(tmp, *pc, true, false);  // binary, no camera element
   } else if (path.size() > 4 && path.substr(path.size() - 4) == ".pcd") {
     rc = pcl::io::savePCDFileBinary(tmp, *pc);
   } else {
