@@ -24,12 +24,15 @@ int main(int argc, char** argv) {
   cellsight_ros::param(pnh, "output_file", goal.output_file);
   cellsight_ros::param(pnh, "result_file", result_file);
   cellsight_ros::param(pnh, "timeout", timeout);
+  double start_delay = 0.0;  // e.g. to let a recorder subscribe first
+  cellsight_ros::param(pnh, "start_delay", start_delay);
   actionlib::SimpleActionClient<cellsight::ScanAction> client("scan", true);
   if (!client.waitForServer(ros::Duration(60.0))) {
     ROS_ERROR("scan_client: no Scan action server on %s within 60 s: is camera_trigger running?",
               ros::names::resolve("scan").c_str());
     return 1;
   }
+  if (start_delay > 0) ros::WallDuration(start_delay).sleep();
   client.sendGoal(goal, {}, {}, [](const cellsight::ScanFeedbackConstPtr& fb) {
     ROS_INFO_THROTTLE(2.0, "scan_client: %u / %u", fb->done, fb->total);
   });

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <numeric>
 #include <sstream>
+#include <tuple>
 
 #include "cellsight/accuracy.hpp"
 #include "cellsight/evaluation.hpp"
@@ -228,6 +229,30 @@ int runScan(const Args& a) {
   return 0;
 }
 
+// Two clouds of the same scan (live and replayed): same points? Sorted lexicographically and
+// compared point by point; exit 0 when the counts match and every distance ≤ --tolerance-m.
+int runCompare(const Args& a) {
+  ScanCloud x = loadCloud(a.get("a")), y = loadCloud(a.get("b"));
+  const double tol = std::stod(a.get("tolerance-m", "1e-6"));
+  auto sorted = [](const ScanCloud& c) {
+    std::vector<Eigen::Vector3f> p = c.points;
+    std::sort(p.begin(), p.end(), [](const Eigen::Vector3f& l, const Eigen::Vector3f& r) {
+      return std::tie(l.x(), l.y(), l.z()) < std::tie(r.x(), r.y(), r.z());
+    });
+    return p;
+  };
+  const auto px = sorted(x), py = sorted(y);
+  double max_d = 0;
+  const bool same_count = px.size() == py.size();
+  if (same_count) {
+    for (size_t i = 0; i < px.size(); ++i) max_d = std::max(max_d, static_cast<double>((px[i] - py[i]).norm()));
+  }
+  nlohmann::json out = {{"points_a", px.size()}, {"points_b", py.size()}, {"max_distance_m", same_count ? max_d : -1.0},
+                        {"tolerance_m", tol}, {"same", same_count && max_d <= tol}};
+  std::cout << out.dump(2) << "\n";
+  return same_count && max_d <= tol ? 0 : 1;
+}
+
 int runCloud(const Args& a) {
   const ScanCloud c = loadCloud(a.get("cloud"));
   std::vector<double> ctr;
@@ -250,6 +275,7 @@ int main(int argc, char** argv) {
       "         [--no-noise] [--estimator centroid|gaussian3|run_centre] [--smoothing-degree N]\n"
       "         [--k 5] [--sphere-step-mm 0.5] [--no-filter] [--ply scan.ply] [--json out.json]\n"
       "       cellsight_scanner_accuracy scan --scene S.yaml --cloud scan.ply [--k 5] [--json out.json]\n"
+      "       cellsight_scanner_accuracy compare --a live.ply --b replay.ply [--tolerance-m 1e-6]\n"
       "       cellsight_scanner_accuracy cloud --cloud scan.ply --center x,y,z [--radius-mm 12.5] [--json out.json]\n";
   if (argc < 2) {
     std::cerr << usage;
@@ -261,6 +287,7 @@ int main(int argc, char** argv) {
     if (mode == "sim") return runSim(a);
     if (mode == "cloud") return runCloud(a);
     if (mode == "scan") return runScan(a);
+    if (mode == "compare") return runCompare(a);
     std::cerr << usage;
     return 2;
   } catch (const std::exception& e) {
