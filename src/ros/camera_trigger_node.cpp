@@ -250,32 +250,57 @@ class CameraTrigger {
     }
     cellsight::ScanFeedback fb;
     fb.total = static_cast<uint32_t>(poses.size());
-    for (size_t i = 1; i < poses.size(); ++i) {
-      if (!move(poses[i], speed_scale, result, expected) || !waitInPosition(expected, i, result)) {
+    int index = 0;
+    // Frames are paired with tf as they arrive (tf keeps only the last seconds).
+    auto drain = [&] {
+      std::vector<sensor_msgs::ImageConstPtr> batch;
+      {
         std::lock_guard<std::mutex> lock(mutex_);
-        recording_ = false;
-        return false;
+        batch.swap(recorded_);
       }
+      for (const auto& f : batch) {
+        if (storeFrame(f, index++)) ++captured;
+      }
+    };
+    bool ok = true;
+    for (size_t i = 1; i < poses.size() && ok; ++i) {
+      if (!move(poses[i], speed_scale, result, expected)) {
+        ok = false;
+        break;
+      }
+      const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(expected + in_position_timeout_);
+      while (true) {
+        {
+          std::unique_lock<std::mutex> lock(mutex_);
+          cv_.wait_for(lock, std::chrono::milliseconds(50));
+          if (!in_position_since_.isZero()) break;
+        }
+        drain();
+        if (!ros::ok() || server_.isPreemptRequested() || ros::WallTime::now() > deadline) {
+          result.status = ScanResult::ROBOT_TIMEOUT;
+          result.message = server_.isPreemptRequested() ? "scan preempted"
+                                                        : "robot did not report io/in_position for pose " + std::to_string(i);
+          ok = false;
+          break;
+        }
+      }
+      if (!ok) break;
       acknowledge();
       fb.done = static_cast<uint32_t>(i + 1);
       server_.publishFeedback(fb);
     }
     ros::WallDuration(0.2).sleep();  // the last frame in flight
-    std::vector<sensor_msgs::ImageConstPtr> frames;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       recording_ = false;
-      frames.swap(recorded_);
     }
-    if (frames.empty()) {
+    drain();
+    if (!ok) return false;
+    if (captured == 0) {
       result.status = ScanResult::CAMERA_TIMEOUT;
       result.message = "no frames arrived while the robot moved: is the camera free-running?";
       return false;
     }
-    for (size_t i = 0; i < frames.size(); ++i) {
-      if (storeFrame(frames[i], static_cast<int>(i))) ++captured;
-    }
-    // Frames arrived before recording started are processed too; count what the tracker sees.
     return true;
   }
 
