@@ -80,6 +80,7 @@ class ScannerRenderer {
  private:
   void laserPass(const Eigen::Isometry3d& T_base_flange, cv::Mat& laser, uint64_t seed,
                  bool noisy) const;
+  static const std::vector<float>& noiseField();
 
   std::shared_ptr<const CellGeometry> geometry_;
   ScannerRenderOptions options_;
@@ -91,6 +92,15 @@ class ScannerRenderer {
   std::vector<float> albedo_;     // < 0: no surface
   std::vector<float> shininess_;
   std::vector<float> footprint_;  // metric size of the pixel on the surface (max over u, v)
+  std::vector<float> ambient_;    // ambient grey level per pixel (albedo × ambient light)
+  // 16×16-pixel tiles: bounds of their surface points and largest footprint, so a frame only
+  // visits the tiles the light sheet can reach.
+  struct Tile {
+    Eigen::Vector3f center, half;
+    float footprint;
+    int u0, v0, u1, v1;
+  };
+  std::vector<Tile> tiles_;
   size_t hit_count_ = 0;
 };
 

@@ -166,6 +166,27 @@ ScannerRenderer::ScannerRenderer(std::shared_ptr<const CellGeometry> geometry,
       footprint_[i] = fp;
     }
   }
+  const float ambient = static_cast<float>(geometry_->scene().noise.ambient);
+  ambient_.resize(n);
+  for (size_t i = 0; i < n; ++i) ambient_[i] = albedo_[i] > 0 ? ambient * albedo_[i] : 0.f;
+  constexpr int kTile = 16;
+  for (int v0 = 0; v0 < height_; v0 += kTile) {
+    for (int u0 = 0; u0 < width_; u0 += kTile) {
+      Eigen::AlignedBox3f box;
+      float fp = 0;
+      const int u1 = std::min(width_, u0 + kTile), v1 = std::min(height_, v0 + kTile);
+      for (int v = v0; v < v1; ++v) {
+        for (int u = u0; u < u1; ++u) {
+          const size_t i = static_cast<size_t>(v) * width_ + u;
+          if (albedo_[i] < 0) continue;
+          box.extend(points_[i]);
+          fp = std::max(fp, footprint_[i]);
+        }
+      }
+      if (box.isEmpty()) continue;
+      tiles_.push_back({box.center(), box.sizes() / 2, fp, u0, v0, u1, v1});
+    }
+  }
 }
 
 Plane ScannerRenderer::planeInCamera(const Eigen::Isometry3d& T_base_flange) const {
@@ -196,8 +217,14 @@ void ScannerRenderer::laserPass(const Eigen::Isometry3d& T_base_flange, cv::Mat&
   laser.create(height_, width_, CV_32F);
   laser.setTo(0);
   auto* out = reinterpret_cast<float*>(laser.data);
-  const size_t n = points_.size();
-  for (size_t i = 0; i < n; ++i) {
+  for (const Tile& tile : tiles_) {
+    // The sheet's distance over the tile's box: |centre distance| − box extent along n.
+    const float reach = std::abs(nL.x()) * tile.half.x() + std::abs(nL.y()) * tile.half.y() +
+                        std::abs(nL.z()) * tile.half.z();
+    if (std::abs(nL.dot(tile.center) - ns) - reach > band + tile.footprint) continue;
+    for (int tv = tile.v0; tv < tile.v1; ++tv) {
+    for (int tu = tile.u0; tu < tile.u1; ++tu) {
+    const size_t i = static_cast<size_t>(tv) * width_ + tu;
     if (albedo_[i] < 0) continue;
     const Eigen::Vector3f& P = points_[i];
     const float s = nL.dot(P) - ns;
@@ -213,8 +240,7 @@ void ScannerRenderer::laserPass(const Eigen::Isometry3d& T_base_flange, cv::Mat&
     const Eigen::Vector3f origin = P + N * 2e-6f;
     if (rc.occluded(origin, l, 0.f, (o - origin).norm() - 1e-5f)) continue;  // laser shadow
     // Sheet-distance gradient across the pixel (neighbour rays cut the tangent plane).
-    const int u = static_cast<int>(i % static_cast<size_t>(width_));
-    const int v = static_cast<int>(i / static_cast<size_t>(width_));
+    const int u = tu, v = tv;
     float g[2];
     for (int k = 0; k < 2; ++k) {
       const int du = k == 0 ? (u + 1 < width_ ? 1 : -1) : 0;
@@ -263,6 +289,8 @@ void ScannerRenderer::laserPass(const Eigen::Isometry3d& T_base_flange, cv::Mat&
         for (int dx = -1; dx <= 1; ++dx)
           out[qi + static_cast<size_t>(dy * width_ + dx)] += spot * kernel[dy + 1][dx + 1];
     }
+    }
+    }
   }
 }
 
@@ -277,29 +305,49 @@ cv::Mat ScannerRenderer::render(const Eigen::Isometry3d& T_base_flange, uint64_t
   const bool noisy = options_.noise && sc.noise.enabled;
   cv::Mat laser;
   laserPass(T_base_flange, laser, frame_seed, noisy);
-  const float ambient = options_.ambient && sc.noise.enabled ? static_cast<float>(sc.noise.ambient) : 0.f;
+  const bool with_ambient = options_.ambient && sc.noise.enabled;
   const float sigma = noisy ? static_cast<float>(sc.noise.sensor_sigma) : 0.f;
   const bool rgb = sc.scanner_camera.encoding == "rgb8";
   const int channel = sc.laser.colour == "red" ? 0 : sc.laser.colour == "green" ? 1 : 2;
-  NoiseSource rng(frame_seed);
-  const auto* l = reinterpret_cast<const float*>(laser.data);
   const size_t n = points_.size();
+  // Sensor noise: a window of a fixed N(0,1) field at a per-frame random offset, so the pass
+  // over every pixel is a straight, vectorisable loop.
+  const std::vector<float>& field = noiseField();
+  NoiseSource rng(frame_seed);
+  const size_t span = rgb ? 3 * n : n;
+  const size_t offset = span < field.size() ? static_cast<size_t>(rng.next() % (field.size() - span)) : 0;
+  const float* __restrict nz = field.data() + offset;
+  const float* __restrict l = reinterpret_cast<const float*>(laser.data);
+  const float* __restrict amb = ambient_.data();
+  const float amb_scale = with_ambient ? 1.f : 0.f;
   cv::Mat img(height_, width_, rgb ? CV_8UC3 : CV_8UC1);
-  uint8_t* px = img.data;
-  auto to8 = [](float x) {
-    return static_cast<uint8_t>(x <= 0.f ? 0 : x >= 255.f ? 255 : static_cast<int>(x + 0.5f));
-  };
-  for (size_t i = 0; i < n; ++i) {
-    const float base = albedo_[i] > 0 ? ambient * albedo_[i] : 0.f;
-    if (!rgb) {
-      px[i] = to8(base + l[i] + (sigma > 0 ? sigma * rng.gaussian() : 0.f));
-    } else {
+  uint8_t* __restrict px = img.data;
+  if (!rgb) {
+    for (size_t i = 0; i < n; ++i) {
+      float x = amb_scale * amb[i] + l[i] + sigma * nz[i] + 0.5f;
+      x = x < 0.f ? 0.f : (x > 255.f ? 255.f : x);
+      px[i] = static_cast<uint8_t>(x);
+    }
+  } else {
+    for (size_t i = 0; i < n; ++i) {
       for (int c = 0; c < 3; ++c) {
-        px[3 * i + c] = to8(base + (c == channel ? l[i] : 0.f) + (sigma > 0 ? sigma * rng.gaussian() : 0.f));
+        float x = amb_scale * amb[i] + (c == channel ? l[i] : 0.f) + sigma * nz[3 * i + c] + 0.5f;
+        x = x < 0.f ? 0.f : (x > 255.f ? 255.f : x);
+        px[3 * i + c] = static_cast<uint8_t>(x);
       }
     }
   }
   return img;
+}
+
+const std::vector<float>& ScannerRenderer::noiseField() {
+  static const std::vector<float> field = [] {
+    std::vector<float> f(size_t(1) << 23);  // 8 Mi samples: room for an rgb8 2 MP frame
+    NoiseSource rng(0x5EEDull);
+    for (auto& x : f) x = rng.gaussian();
+    return f;
+  }();
+  return field;
 }
 
 // ---------------------------------------------------------------- fixture camera
