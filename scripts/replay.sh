@@ -18,7 +18,7 @@ done
 rosservice list | grep -q '^/scan/finish$' || { echo "replay: triangulation did not start (see $LOG)" >&2; exit 1; }
 sleep 1  # subscriptions connected
 frames=$(/usr/bin/python3 -c 'import rosbag,sys; b=rosbag.Bag(sys.argv[1]); print(b.get_message_count("/scanner_camera/image_raw"))' "$BAG")
-rosbag play --clock --quiet "$BAG" --topics /scanner_camera/image_raw /scanner_camera/camera_info /tf /tf_static
+rosbag play --clock --quiet --delay 2 "$BAG" --topics /scanner_camera/image_raw /scanner_camera/camera_info /tf /tf_static
 rosservice call /scan/finish "{output_file: '$OUTPUT', expected_frames: $frames, wait_frames_timeout: 60.0}" \
   | tee "$OUTPUT.finish.txt" | grep -E '^(status|message|frames|points):'
 grep -q '^status: 0' "$OUTPUT.finish.txt"

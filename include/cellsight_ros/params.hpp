@@ -24,17 +24,6 @@ void param(const ros::NodeHandle& nh, const std::string& name, T& value) {
   nh.param(name, value, value);
 }
 
-}  // namespace cellsight_ros
-
-#include "cellsight/line_extraction.hpp"
-#include "cellsight/triangulation.hpp"
-
-namespace cellsight_ros {
-
-/// Line extraction settings from `<ns>/...` (each default lives in the config struct).
-cellsight::LineExtractionConfig loadLineConfig(const ros::NodeHandle& nh);
-cellsight::TriangulationConfig loadTriangulationConfig(const ros::NodeHandle& nh);
-
 /// `$(find cellsight)` resolved at run time: the package's source folder.
 std::string packagePath();
 

@@ -16,6 +16,7 @@
 
 #include "cellsight/FinishScan.h"
 #include "cellsight/scan_cloud.hpp"
+#include "cellsight/scanner_config.hpp"
 #include "cellsight/sim_scan.hpp"
 #include "cellsight/triangulation.hpp"
 #include "cellsight_ros/conversions.hpp"
@@ -30,18 +31,18 @@ class Triangulation {
   Triangulation(ros::NodeHandle& nh, ros::NodeHandle& pnh)
       : listener_(buffer_), image_sub_(nh, "scanner_camera/image_raw", 10),
         plane_sub_(nh, "scan/laser_plane", 10), sync_(image_sub_, plane_sub_, 20) {
-    line_ = cellsight_ros::loadLineConfig(pnh);
-    tri_ = cellsight_ros::loadTriangulationConfig(pnh);
+    // One strictly validated settings file (config/scanner.yaml): a typo stops the node at start.
+    const std::string settings_file = cellsight_ros::requireParam<std::string>(
+        pnh, "settings_file", "scanner settings YAML, e.g. $(find cellsight)/config/scanner.yaml");
+    const cellsight::ScannerSettings settings = cellsight::loadScannerSettings(settings_file);
+    line_ = settings.line;
+    tri_ = settings.triangulation;
+    outlier_k_ = settings.outlier_k;
+    outlier_std_ = settings.outlier_std;
+    normal_k_ = settings.normal_k;
+    has_workspace_ = settings.has_workspace;
+    workspace_ = settings.workspace;
     cellsight_ros::param(pnh, "base_frame", base_frame_);
-    cellsight_ros::param(pnh, "outlier_k", outlier_k_);
-    cellsight_ros::param(pnh, "outlier_std", outlier_std_);
-    cellsight_ros::param(pnh, "normal_k", normal_k_);
-    std::vector<double> lo, hi;
-    if (pnh.getParam("workspace_min", lo) && pnh.getParam("workspace_max", hi)) {
-      if (lo.size() != 3 || hi.size() != 3) throw std::runtime_error("~workspace_min/max need 3 numbers (m)");
-      workspace_ = Eigen::AlignedBox3f(Eigen::Vector3f(lo[0], lo[1], lo[2]), Eigen::Vector3f(hi[0], hi[1], hi[2]));
-      has_workspace_ = true;
-    }
     info_sub_ = nh.subscribe("scanner_camera/camera_info", 5, &Triangulation::onInfo, this);
     sync_.registerCallback(&Triangulation::onFrame, this);
     profile_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/profile", 20);

@@ -11,6 +11,7 @@
 
 #include "cellsight/calibration.hpp"
 #include "cellsight/camera_model.hpp"
+#include "cellsight/scanner_config.hpp"
 #include "cellsight/scene.hpp"
 #include "cellsight/trajectory.hpp"
 #include "cellsight/yaml_reader.hpp"
@@ -53,6 +54,10 @@ std::string validateFile(const std::string& f) {
   if (node.IsMap() && node["parent_frame"]) {
     const auto c = cellsight::loadTransformCalibration(f);
     return "transform " + c.parent_frame + " -> " + c.child_frame;
+  }
+  if (node.IsMap() && (node["line"] || node["triangulation"] || node["outlier_k"])) {
+    cellsight::loadScannerSettings(f);
+    return "scanner settings";
   }
   if (f.size() >= 10 && f.substr(f.size() - 10) == "model.yaml") {
     return "model '" + cellsight::loadModelInfo(f).id + "'";

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "cellsight/calibration.hpp"
+#include "cellsight/scanner_config.hpp"
 #include "cellsight/scene.hpp"
 #include "cellsight/trajectory.hpp"
 #include "cellsight/yaml_reader.hpp"
@@ -84,6 +85,20 @@ TEST(ShippedConfig, DemoSceneMatchesTheThesisWorkspace) {
   EXPECT_TRUE(sphere);
   EXPECT_GE(parts, 3);
   EXPECT_LE(parts, 5);
+}
+
+TEST(ShippedConfig, ScannerSettingsLoadAndTypoIsNamed) {
+  const ScannerSettings s = loadScannerSettings(kConfig + "/scanner.yaml");
+  EXPECT_TRUE(s.has_workspace);
+  EXPECT_EQ(s.line.smoothing_degree, 2);
+  const std::string dir = cellsight_test::tempDir();
+  cellsight_test::writeText(dir + "/s.yaml", "line: {estimater: centroid}\n");
+  try {
+    loadScannerSettings(dir + "/s.yaml");
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("line.estimater: unknown key"), std::string::npos) << e.what();
+  }
 }
 
 TEST(BadConfig, GoodBaseSceneLoads) { EXPECT_EQ(sceneError(kGoodScene), ""); }
