@@ -88,6 +88,13 @@ LaserCalibrationResult calibrateLaserThreePoint(const LaserObservation& obs, con
                                                 const Eigen::Isometry3d& T_base_camera,
                                                 const LineExtractionConfig& line);
 
+/// Observations file: {observations: [{image, flange_pose, plane_z, block_z}]}, image paths
+/// relative to the file. Throws ConfigError naming the file and key.
+std::vector<LaserObservation> loadLaserObservations(const std::string& path);
+
+/// Image files of folders (sorted .png/.jpg/.jpeg) and plain files, in order.
+std::vector<std::string> listImages(const std::vector<std::string>& folders_or_files);
+
 /// Builds T_flange_laser for a sheet given in the flange frame: origin at the flange origin's
 /// projection on the sheet, z towards `towards` (projected into the sheet), y = sheet normal.
 Eigen::Isometry3d laserFrameFromPlane(const Plane& plane_flange, const Eigen::Vector3d& towards);

@@ -7,9 +7,61 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "cellsight/file_io.hpp"
 #include "cellsight/triangulation.hpp"
+#include "cellsight/yaml_reader.hpp"
+
+#include <dirent.h>
+#include <sys/stat.h>
+
+#include <algorithm>
 
 namespace cellsight {
+
+std::vector<LaserObservation> loadLaserObservations(const std::string& path) {
+  YamlMap root(loadYamlFile(path), path);
+  std::vector<LaserObservation> obs;
+  for (const YamlMap& m : root.getMapList("observations")) {
+    LaserObservation o;
+    const std::string img = resolveRelative(path, m.getString("image"));
+    o.image = cv::imread(img, cv::IMREAD_GRAYSCALE);
+    if (o.image.empty()) m.fail("image", "cannot read " + img);
+    o.T_base_flange = m.getPose("flange_pose");
+    o.plane_z = m.getDouble("plane_z", 0.0);
+    o.block_z = m.getDouble("block_z", 0.0);
+    m.finish();
+    obs.push_back(o);
+  }
+  root.finish();
+  if (obs.empty()) throw ConfigError(path + ": observations: the list is empty");
+  return obs;
+}
+
+std::vector<std::string> listImages(const std::vector<std::string>& args) {
+  std::vector<std::string> out;
+  for (const auto& p : args) {
+    struct stat st {};
+    if (::stat(p.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) {
+      std::vector<std::string> files;
+      if (DIR* d = opendir(p.c_str())) {
+        while (dirent* e = readdir(d)) {
+          std::string lower = e->d_name;
+          std::transform(lower.begin(), lower.end(), lower.begin(), ::tolower);
+          const auto ends = [&](const std::string& x) {
+            return lower.size() > x.size() && lower.compare(lower.size() - x.size(), x.size(), x) == 0;
+          };
+          if (ends(".png") || ends(".jpg") || ends(".jpeg")) files.push_back(p + "/" + e->d_name);
+        }
+        closedir(d);
+      }
+      std::sort(files.begin(), files.end());
+      out.insert(out.end(), files.begin(), files.end());
+    } else {
+      out.push_back(p);
+    }
+  }
+  return out;
+}
 
 DistortionModel parseDistortionModel(const std::string& name) {
   if (name == "k1") return DistortionModel::kK1;

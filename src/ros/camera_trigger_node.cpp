@@ -126,7 +126,7 @@ class CameraTrigger {
         return;
       }
     }
-    const bool processing = reset_client_.waitForExistence(ros::Duration(10.0)) && finish_client_.exists();
+    const bool processing = reset_client_.waitForExistence(ros::Duration(3.0)) && finish_client_.exists();
     if (processing) {
       std_srvs::Trigger t;
       reset_client_.call(t);

@@ -9,9 +9,6 @@
 //               [--method lsq|three_point] [--flange flange] [--child laser] --out laser.yaml
 //               obs.yaml: {observations: [{image: f.png, flange_pose: {xyz, rpy|quat}, plane_z: 0,
 //               block_z: 0.02}, ...]} (image paths relative to obs.yaml)
-#include <dirent.h>
-#include <sys/stat.h>
-
 #include <algorithm>
 #include <iostream>
 #include <map>
@@ -69,32 +66,6 @@ ChessboardSpec board(const Args& a) {
   return b;
 }
 
-std::vector<std::string> imageFiles(const std::vector<std::string>& args) {
-  std::vector<std::string> out;
-  for (const auto& p : args) {
-    struct stat st {};
-    if (::stat(p.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) {
-      std::vector<std::string> files;
-      if (DIR* d = opendir(p.c_str())) {
-        while (dirent* e = readdir(d)) {
-          std::string n = e->d_name;
-          std::string lower = n;
-          std::transform(lower.begin(), lower.end(), lower.begin(), ::tolower);
-          if (lower.size() > 4 && (lower.substr(lower.size() - 4) == ".png" || lower.substr(lower.size() - 4) == ".jpg" ||
-                                   lower.substr(lower.size() - 5) == ".jpeg"))
-            files.push_back(p + "/" + n);
-        }
-        closedir(d);
-      }
-      std::sort(files.begin(), files.end());
-      out.insert(out.end(), files.begin(), files.end());
-    } else {
-      out.push_back(p);
-    }
-  }
-  return out;
-}
-
 void saveTransform(const std::string& path, const std::string& parent, const std::string& child,
                    const Eigen::Isometry3d& T, double residual, const std::string& method) {
   TransformCalibration c;
@@ -108,7 +79,7 @@ void saveTransform(const std::string& path, const std::string& parent, const std
 }
 
 int intrinsics(const Args& a) {
-  const auto files = imageFiles(a.kv.count("images") ? a.kv.at("images") : std::vector<std::string>{});
+  const auto files = listImages(a.kv.count("images") ? a.kv.at("images") : std::vector<std::string>{});
   if (files.empty()) throw std::invalid_argument("--images: no image files given or found");
   const DistortionModel model = parseDistortionModel(a.get("model", "full"));
   IntrinsicsResult r = calibrateIntrinsics(files, board(a), model, a.flag("fix-aspect"));
@@ -149,21 +120,7 @@ int extrinsics(const Args& a) {
 int laser(const Args& a) {
   const CameraIntrinsics cam = loadCameraInfoYaml(a.need("camera"));
   const TransformCalibration cam_pose = loadTransformCalibration(a.need("camera-pose"));
-  const std::string obs_file = a.need("observations");
-  YamlMap root(loadYamlFile(obs_file), obs_file);
-  std::vector<LaserObservation> obs;
-  for (const YamlMap& m : root.getMapList("observations")) {
-    LaserObservation o;
-    const std::string img = resolveRelative(obs_file, m.getString("image"));
-    o.image = cv::imread(img, cv::IMREAD_GRAYSCALE);
-    if (o.image.empty()) m.fail("image", "cannot read " + img);
-    o.T_base_flange = m.getPose("flange_pose");
-    o.plane_z = m.getDouble("plane_z", 0.0);
-    o.block_z = m.getDouble("block_z", 0.0);
-    m.finish();
-    obs.push_back(o);
-  }
-  root.finish();
+  const std::vector<LaserObservation> obs = loadLaserObservations(a.need("observations"));
   const std::string method = a.get("method", "lsq");
   LineExtractionConfig line;
   LaserCalibrationResult r;

@@ -3,15 +3,13 @@
 // Usage: cellsight_extract_line --images <dir or files...> [--channel red|green|blue|mono]
 //          [--along rows|columns] [--estimator centroid] [--overlay out.png [--overlay-index N]]
 //          [--json out.json]
-#include <dirent.h>
-#include <sys/stat.h>
-
 #include <algorithm>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "cellsight/calibrate.hpp"
 #include "cellsight/file_io.hpp"
 #include "cellsight/line_extraction.hpp"
 
@@ -42,24 +40,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  std::vector<std::string> files;
-  for (const auto& p : inputs) {
-    struct stat st {};
-    if (::stat(p.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) {
-      std::vector<std::string> f;
-      if (DIR* d = opendir(p.c_str())) {
-        while (dirent* e = readdir(d)) {
-          const std::string n = e->d_name;
-          if (n.size() > 4 && (n.substr(n.size() - 4) == ".jpg" || n.substr(n.size() - 4) == ".png")) f.push_back(p + "/" + n);
-        }
-        closedir(d);
-      }
-      std::sort(f.begin(), f.end());
-      files.insert(files.end(), f.begin(), f.end());
-    } else {
-      files.push_back(p);
-    }
-  }
+  const std::vector<std::string> files = listImages(inputs);
   if (files.empty()) {
     std::cerr << "error: no images (use --images <dir or files>)\n";
     return 2;

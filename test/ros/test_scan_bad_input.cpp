@@ -1,0 +1,54 @@
+#include <actionlib/client/simple_action_client.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+
+#include "cellsight/MoveFlange.h"
+#include "cellsight/ScanAction.h"
+
+namespace {
+// A robot that accepts every pose and never reaches it (a stuck program, a broken I/O wire).
+bool stuckRobot(cellsight::MoveFlange::Request&, cellsight::MoveFlange::Response& res) {
+  res.status = cellsight::MoveFlange::Response::OK;
+  res.message = "moving";
+  res.expected_duration = 0.2;
+  return true;
+}
+}  // namespace
+
+TEST(ScanBadInput, UnknownTrajectoryIsRefused) {
+  actionlib::SimpleActionClient<cellsight::ScanAction> client("scan", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(30)));
+  cellsight::ScanGoal goal;
+  goal.trajectory = "no_such_trajectory";
+  client.sendGoal(goal);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::INVALID_GOAL);
+  EXPECT_NE(client.getResult()->message.find("no_such_trajectory"), std::string::npos);
+}
+
+TEST(ScanBadInput, RobotThatNeverArrivesAbortsWithAClearStatus) {
+  ros::NodeHandle nh;
+  ros::ServiceServer robot = nh.advertiseService("robot/move_flange", stuckRobot);
+  actionlib::SimpleActionClient<cellsight::ScanAction> client("scan", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(30)));
+  cellsight::ScanGoal goal;
+  goal.trajectory = "quick_sweep";
+  client.sendGoal(goal);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(40)));
+  EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
+  EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::ROBOT_TIMEOUT);
+  EXPECT_NE(client.getResult()->message.find("io/in_position"), std::string::npos) << client.getResult()->message;
+  // The server is still there for the next goal.
+  client.sendGoal(goal);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(40)));
+  EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::ROBOT_TIMEOUT);
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_scan_bad_input");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
