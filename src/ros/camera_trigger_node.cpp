@@ -49,7 +49,7 @@ class CameraTrigger {
     cellsight_ros::param(pnh, "capture_timeout", capture_timeout_);
     cellsight_ros::param(pnh, "tf_timeout", tf_timeout_);
     cellsight_ros::param(pnh, "processing_timeout", processing_timeout_);
-    move_client_ = nh.serviceClient<cellsight::MoveFlange>("robot/move_flange");
+    move_client_ = nh.serviceClient<cellsight::MoveFlange>("robot/move_flange", true);
     reset_client_ = nh.serviceClient<std_srvs::Trigger>("scan/reset");
     finish_client_ = nh.serviceClient<cellsight::FinishScan>("scan/finish");
     capture_done_pub_ = nh.advertise<std_msgs::Bool>("io/capture_done", 10, true);
@@ -119,13 +119,12 @@ class CameraTrigger {
       result.message = err;
       return;
     }
-    for (auto* c : {&move_client_}) {
-      if (!c->waitForExistence(ros::Duration(30.0))) {
-        result.status = ScanResult::ROBOT_TIMEOUT;
-        result.message = "service " + c->getService() + " did not appear in 30 s: is the robot driver (or cell_sim) running?";
-        return;
-      }
+    if (!move_client_.waitForExistence(ros::Duration(30.0))) {
+      result.status = ScanResult::ROBOT_TIMEOUT;
+      result.message = "service " + move_client_.getService() + " did not appear in 30 s: is the robot driver (or cell_sim) running?";
+      return;
     }
+    if (!move_client_.isValid()) move_client_ = nh_.serviceClient<cellsight::MoveFlange>("robot/move_flange", true);
     const bool processing = reset_client_.waitForExistence(ros::Duration(3.0)) && finish_client_.exists();
     if (processing) {
       std_srvs::Trigger t;
@@ -176,9 +175,23 @@ class CameraTrigger {
       std::lock_guard<std::mutex> lock(mutex_);
       in_position_since_ = ros::Time(0);
     }
-    if (!move_client_.call(srv)) {
+    // A call that fails in transport (connection dropped under load) is retried once on a new
+    // connection; if the first call did reach the robot, the retry finds it already moving.
+    bool called = move_client_.call(srv);
+    if (!called) {
+      ROS_WARN("camera_trigger: call to %s failed; retrying on a new connection", move_client_.getService().c_str());
+      ros::WallDuration(0.2).sleep();
+      move_client_ = nh_.serviceClient<cellsight::MoveFlange>("robot/move_flange", true);
+      called = move_client_.call(srv);
+      if (called && srv.response.status == cellsight::MoveFlange::Response::REJECTED_BUSY &&
+          srv.response.message.find("moving") != std::string::npos) {
+        srv.response.status = cellsight::MoveFlange::Response::OK;
+        srv.response.expected_duration = in_position_timeout_;
+      }
+    }
+    if (!called) {
       result.status = ScanResult::ROBOT_REJECTED;
-      result.message = "call to " + move_client_.getService() + " failed (robot driver gone?)";
+      result.message = "call to " + move_client_.getService() + " failed twice (robot driver gone?)";
       return false;
     }
     if (srv.response.status != cellsight::MoveFlange::Response::OK) {

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <condition_variable>
 #include <fstream>
 #include <memory>
 #include <mutex>
@@ -85,7 +86,7 @@ class CellSim {
 
  private:
   bool onMove(MoveFlange::Request& req, MoveFlange::Response& res) {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::unique_lock<std::mutex> lock(mutex_);
     const cellsight::Scene& s = geometry_->scene();
     if (!req.target.header.frame_id.empty() && req.target.header.frame_id != s.base_frame) {
       res.status = MoveFlange::Response::REJECTED_INVALID;
@@ -105,6 +106,11 @@ class CellSim {
       res.status = MoveFlange::Response::REJECTED_BUSY;
       res.message = "robot is still moving";
       return true;
+    }
+    // Like a robot program's WAIT on its "capture done" input: the acknowledgement travels on a
+    // topic and may arrive just after this request, so wait a moment before refusing.
+    if (handshake_ && awaiting_capture_) {
+      capture_cv_.wait_for(lock, std::chrono::milliseconds(500), [&] { return !awaiting_capture_; });
     }
     if (handshake_ && awaiting_capture_) {
       res.status = MoveFlange::Response::REJECTED_BUSY;
@@ -134,6 +140,7 @@ class CellSim {
   void onCaptureDone(const std_msgs::Bool::ConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);
     if (msg->data) awaiting_capture_ = false;
+    capture_cv_.notify_all();
   }
 
   /// The flange pose at time t of the current motion (mutex_ held).
@@ -320,6 +327,7 @@ class CellSim {
   ros::ServiceServer move_srv_;
   ros::Timer tf_timer_, fixture_timer_, scanner_timer_;
   std::mutex mutex_, capture_mutex_;
+  std::condition_variable capture_cv_;
   Eigen::Isometry3d pose_, start_pose_, target_pose_;
   ros::Time move_start_, last_tf_stamp_;
   double duration_ = 0;
@@ -336,7 +344,7 @@ int main(int argc, char** argv) {
   ros::NodeHandle nh, pnh("~");
   try {
     CellSim sim(nh, pnh);
-    ros::AsyncSpinner spinner(2);  // rendering must not stall the flange tf
+    ros::AsyncSpinner spinner(3);  // rendering must not stall the flange tf or the I/O
     spinner.start();
     ros::waitForShutdown();
   } catch (const std::exception& e) {
