@@ -11,6 +11,7 @@
 
 #include "cellsight/calibration.hpp"
 #include "cellsight/camera_model.hpp"
+#include "cellsight/clustering.hpp"
 #include "cellsight/scanner_config.hpp"
 #include "cellsight/scene.hpp"
 #include "cellsight/trajectory.hpp"
@@ -54,6 +55,10 @@ std::string validateFile(const std::string& f) {
   if (node.IsMap() && node["parent_frame"]) {
     const auto c = cellsight::loadTransformCalibration(f);
     return "transform " + c.parent_frame + " -> " + c.child_frame;
+  }
+  if (node.IsMap() && node["cluster_tolerance"]) {
+    cellsight::loadClusteringConfig(f);
+    return "clustering settings";
   }
   if (node.IsMap() && (node["line"] || node["triangulation"] || node["outlier_k"])) {
     cellsight::loadScannerSettings(f);

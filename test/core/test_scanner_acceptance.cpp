@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "cellsight/accuracy.hpp"
+#include "cellsight/clustering.hpp"
 #include "cellsight/evaluation.hpp"
 #include "cellsight/sim_scan.hpp"
 #include "cellsight/trajectory.hpp"
@@ -64,4 +65,29 @@ TEST(ScannerAcceptance, ReferenceSphereProbingAndMultiOrientationErrors) {
   for (const auto& f : acc.fits) EXPECT_GT(f.points, 1000u);
   EXPECT_LT(acc.mpe_p, 0.15e-3);
   EXPECT_LT(acc.mpe_al, 0.10e-3);
+}
+
+TEST(ScannerAcceptance, DemoScanSegmentsIntoOneClusterPerPart) {
+  const Scene s = loadScene(kRoot + "/config/scenes/demo.yaml");
+  ScannerRenderer r(std::make_shared<CellGeometry>(s));
+  const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
+  const ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(s), {}, {}, 3);
+  const ClusteringResult res = clusterScene(cloud, loadClusteringConfig(kRoot + "/config/clustering.yaml"));
+  ASSERT_TRUE(res.plane_found);
+  std::printf("demo scan: %zu points -> %zu after voxel -> %zu above the table -> %zu clusters\n", res.input_points,
+              res.after_voxel, res.after_plane, res.clusters.size());
+  EXPECT_EQ(res.clusters.size(), s.objects.size());
+  // Every part's true position lies inside exactly one cluster's box (grown by 5 mm).
+  for (const auto& o : s.objects) {
+    int hits = 0;
+    for (const auto& c : res.clusters) {
+      Eigen::AlignedBox3f b = c.box;
+      b.extend(b.min() - Eigen::Vector3f::Constant(0.005f));
+      b.extend(b.max() + Eigen::Vector3f::Constant(0.005f));
+      Eigen::Vector3f p = o.T_base_object.translation().cast<float>();
+      p.z() = c.box.min().z();  // object origins sit on the table: compare in the plane
+      if (b.contains(p)) ++hits;
+    }
+    EXPECT_EQ(hits, 1) << o.name;
+  }
 }
