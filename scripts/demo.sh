@@ -109,7 +109,7 @@ sd = subprocess.run(["/usr/bin/convert", os.path.join(out, "rviz.png"), "-colors
                      "-format", "%[fx:standard_deviation]", "info:"],
                     capture_output=True, text=True).stdout.strip()
 report = {
-    "what_ran": ["cell_sim", "calibration_publisher", "laser_plane_tracker", "triangulation",
+    "what_ran": ["cell_sim", "calibration_publisher", "laser_plane_tracker", "triangulation", "clustering",
                  "camera_trigger (Scan action)", "scan_client", "rosbag record", "rviz (Xvfb)",
                  "cellsight_scanner_accuracy scan"],
     "scene": "config/scenes/demo.yaml",
@@ -130,8 +130,13 @@ report = {
     "outputs": sorted(os.listdir(out)),
 }
 report["scanner"] = scanner
+import re
+clusters = re.findall(r"clustering: (\d+) points -> (\d+) clusters", open(os.path.join(out, "launch.log")).read())
+if clusters:
+    report["clustering"] = {"input_points": int(clusters[-1][0]), "clusters": int(clusters[-1][1]),
+                            "objects_in_scene": len(json.load(open(os.path.join(out, "truth", "scene_truth.json")))["objects"])}
 write_json("report.json", report)
-print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds")}, indent=1))
+print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds", "clustering") if k in report}, indent=1))
 print(json.dumps({k: v for k, v in scanner.items() if k not in ("notes", "sphere_in_scan")}, indent=1))
 missing = [t for t in ("/scanner_camera/image_raw", "/scanner_camera/camera_info", "/tf", "/tf_static") if t not in topics]
 if len(frames["frames"]) != frames["poses"] or missing:

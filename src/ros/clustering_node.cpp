@@ -1,0 +1,98 @@
+// clustering: scan/cloud → clusters (cellsight/ClusterArray, one message per scan) and
+// clusters/markers (boxes for rviz). Settings from ~settings_file (config/clustering.yaml).
+#include <ros/ros.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include "cellsight/ClusterArray.h"
+#include "cellsight/clustering.hpp"
+#include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/params.hpp"
+
+namespace {
+
+geometry_msgs::Point point(const Eigen::Vector3f& p) {
+  geometry_msgs::Point q;
+  q.x = p.x();
+  q.y = p.y();
+  q.z = p.z();
+  return q;
+}
+
+class Clustering {
+ public:
+  Clustering(ros::NodeHandle& nh, ros::NodeHandle& pnh) {
+    config_ = cellsight::loadClusteringConfig(cellsight_ros::requireParam<std::string>(
+        pnh, "settings_file", "clustering settings YAML, e.g. $(find cellsight)/config/clustering.yaml"));
+    clusters_pub_ = nh.advertise<cellsight::ClusterArray>("clusters", 1, true);
+    markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("clusters/markers", 1, true);
+    cloud_sub_ = nh.subscribe("scan/cloud", 1, &Clustering::onCloud, this);
+  }
+
+ private:
+  void onCloud(const sensor_msgs::PointCloud2ConstPtr& msg) {
+    try {
+      size_t dropped = 0;
+      const cellsight::ScanCloud cloud = cellsight_ros::fromCloudMsg(*msg, &dropped);
+      const cellsight::ClusteringResult r = cellsight::clusterScene(cloud, config_);
+      cellsight::ClusterArray out;
+      out.header = msg->header;
+      out.support_found = r.plane_found;
+      if (r.plane_found) out.support_plane = {r.support.n.x(), r.support.n.y(), r.support.n.z(), r.support.d};
+      out.input_points = static_cast<uint32_t>(r.input_points);
+      out.points_above_support = static_cast<uint32_t>(r.after_plane);
+      out.warnings = r.warnings;
+      visualization_msgs::MarkerArray markers;
+      visualization_msgs::Marker clear;
+      clear.action = visualization_msgs::Marker::DELETEALL;
+      markers.markers.push_back(clear);
+      int id = 0;
+      for (const auto& c : r.clusters) {
+        out.clouds.push_back(cellsight_ros::toCloudMsg(c.cloud, msg->header.stamp));
+        out.clouds.back().header.frame_id = msg->header.frame_id;
+        out.centroids.push_back(point(c.centroid));
+        out.box_min.push_back(point(c.box.min()));
+        out.box_max.push_back(point(c.box.max()));
+        visualization_msgs::Marker m;
+        m.header = msg->header;
+        m.ns = "clusters";
+        m.id = id++;
+        m.type = visualization_msgs::Marker::CUBE;
+        m.pose.position = point(c.box.center());
+        m.pose.orientation.w = 1;
+        m.scale.x = std::max(1e-3f, c.box.sizes().x());
+        m.scale.y = std::max(1e-3f, c.box.sizes().y());
+        m.scale.z = std::max(1e-3f, c.box.sizes().z());
+        m.color.g = 0.8f;
+        m.color.b = 0.3f;
+        m.color.a = 0.35f;
+        markers.markers.push_back(m);
+      }
+      clusters_pub_.publish(out);
+      markers_pub_.publish(markers);
+      for (const auto& w : r.warnings) ROS_WARN("clustering: %s", w.c_str());
+      ROS_INFO("clustering: %zu points -> %zu clusters%s", r.input_points, r.clusters.size(),
+               r.plane_found ? " (support plane removed)" : "");
+    } catch (const std::exception& e) {
+      ROS_ERROR("clustering: scan at %.3f skipped: %s", msg->header.stamp.toSec(), e.what());
+    }
+  }
+
+  cellsight::ClusteringConfig config_;
+  ros::Publisher clusters_pub_, markers_pub_;
+  ros::Subscriber cloud_sub_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "clustering");
+  ros::NodeHandle nh, pnh("~");
+  try {
+    Clustering node(nh, pnh);
+    ros::spin();
+  } catch (const std::exception& e) {
+    ROS_FATAL("clustering cannot start: %s", e.what());
+    return 1;
+  }
+  return 0;
+}
