@@ -1,0 +1,55 @@
+// The part model library (issue 4, item 2): config/models/<id>/ meshes + metadata, model clouds
+// sampled from the meshes at the scan's resolution with outward normals, and FPFH descriptors,
+// each computed once per (model, resolution) and cached in memory.
+#pragma once
+#include <array>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "cellsight/scan_cloud.hpp"
+#include "cellsight/scene.hpp"
+
+namespace cellsight {
+
+using Fpfh = std::array<float, 33>;
+
+/// Area-weighted random samples on the mesh (seeded), thinned to one per `spacing` voxel;
+/// normals are the outward face normals.
+ScanCloud sampleMesh(const TriangleMesh& mesh, double spacing, uint64_t seed = 1);
+
+/// FPFH (PCL) for every point of a cloud with normals, support radius in metres.
+std::vector<Fpfh> computeFpfh(const ScanCloud& cloud_with_normals, double radius);
+
+struct ModelEntry {
+  ModelInfo info;
+  TriangleMesh mesh;
+  Eigen::AlignedBox3f bounds;
+  std::vector<std::string> warnings;  ///< e.g. degenerate (flat) geometry
+};
+
+class ModelLibrary {
+ public:
+  /// Loads every `<folder>/<id>/model.yaml`; a missing or corrupt model throws ConfigError
+  /// naming the file. A flat or tiny model is kept with a warning.
+  explicit ModelLibrary(const std::string& folder);
+
+  std::vector<std::string> ids() const;
+  bool has(const std::string& id) const { return models_.count(id) > 0; }
+  /// Throws std::out_of_range naming the id and the known ids.
+  const ModelEntry& model(const std::string& id) const;
+  /// The model cloud at a resolution (cached).
+  std::shared_ptr<const ScanCloud> cloud(const std::string& id, double resolution) const;
+  /// FPFH of that cloud at a support radius (cached).
+  std::shared_ptr<const std::vector<Fpfh>> descriptors(const std::string& id, double resolution, double radius) const;
+
+ private:
+  std::map<std::string, ModelEntry> models_;
+  mutable std::mutex mutex_;
+  mutable std::map<std::pair<std::string, long>, std::shared_ptr<const ScanCloud>> clouds_;
+  mutable std::map<std::tuple<std::string, long, long>, std::shared_ptr<const std::vector<Fpfh>>> fpfh_;
+};
+
+}  // namespace cellsight
