@@ -13,25 +13,12 @@
 #include <cmath>
 
 #include "cellsight/yaml_reader.hpp"
+#include "pcl_cloud.hpp"
 
 namespace cellsight {
 
 namespace {
 using PointT = pcl::PointXYZI;
-
-pcl::PointCloud<PointT>::Ptr toPcl(const ScanCloud& c) {
-  auto out = pcl::make_shared<pcl::PointCloud<PointT>>();
-  out->reserve(c.size());
-  for (size_t i = 0; i < c.size(); ++i) {
-    PointT p;
-    p.x = c.points[i].x();
-    p.y = c.points[i].y();
-    p.z = c.points[i].z();
-    p.intensity = i < c.intensity.size() ? c.intensity[i] : 0.f;
-    out->push_back(p);
-  }
-  return out;
-}
 
 pcl::PointCloud<PointT>::Ptr voxelise(const pcl::PointCloud<PointT>::Ptr& in, double leaf) {
   pcl::VoxelGrid<PointT> vg;
@@ -56,7 +43,7 @@ ClusteringResult clusterScene(const ScanCloud& scene, const ClusteringConfig& cf
                                            : "no finite point inside the workspace: nothing to segment");
     return r;
   }
-  auto cloud = toPcl(finite);
+  auto cloud = toPclXyzi<PointT>(finite);
   double leaf = cfg.voxel_size;
   if (cloud->size() > cfg.max_input_points) {
     // Memory bound for huge scenes: a leaf that brings the cloud near the limit.

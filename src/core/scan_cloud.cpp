@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "cellsight/errors.hpp"
+#include "pcl_cloud.hpp"
 
 namespace cellsight {
 
@@ -18,25 +19,14 @@ namespace {
 using PointT = pcl::PointXYZINormal;
 
 pcl::PointCloud<PointT>::Ptr toPcl(const ScanCloud& c) {
-  auto out = pcl::make_shared<pcl::PointCloud<PointT>>();
-  out->resize(c.size());
+  auto out = toPclXyzi<PointT>(c);
   for (size_t i = 0; i < c.size(); ++i) {
     PointT& p = (*out)[i];
-    p.x = c.points[i].x();
-    p.y = c.points[i].y();
-    p.z = c.points[i].z();
-    p.intensity = i < c.intensity.size() ? c.intensity[i] : 0.f;
-    if (i < c.normals.size()) {
-      p.normal_x = c.normals[i].x();
-      p.normal_y = c.normals[i].y();
-      p.normal_z = c.normals[i].z();
-    } else {
-      p.normal_x = p.normal_y = p.normal_z = 0.f;
-    }
+    const bool has = i < c.normals.size();
+    p.normal_x = has ? c.normals[i].x() : 0.f;
+    p.normal_y = has ? c.normals[i].y() : 0.f;
+    p.normal_z = has ? c.normals[i].z() : 0.f;
   }
-  out->width = static_cast<uint32_t>(c.size());
-  out->height = 1;
-  out->is_dense = true;
   return out;
 }
 
