@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "cellsight/renderer.hpp"
+#include "cellsight/plane.hpp"
 #include "cellsight/scan_cloud.hpp"
 
 namespace cellsight {

@@ -1,8 +1,11 @@
-// Scanner evaluation against the simulator's truth: distance of scan points to the true surfaces.
+// Scanner evaluation against the simulator's truth: distance of scan points to the true surfaces,
+// line-centre errors against the analytic line.
 #pragma once
 #include <Eigen/Geometry>
 #include <vector>
 
+#include "cellsight/line_extraction.hpp"
+#include "cellsight/renderer.hpp"
 #include "cellsight/scene.hpp"
 
 namespace cellsight {
@@ -34,12 +37,6 @@ class SurfaceDistance {
 double pointTriangleDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
                              const Eigen::Vector3d& b, const Eigen::Vector3d& c);
 
-}  // namespace cellsight
-
-#include "cellsight/line_extraction.hpp"
-#include "cellsight/renderer.hpp"
-
-namespace cellsight {
 
 /// Line-centre accuracy on a rendered line with a known centre: the scene's objects are removed,
 /// the flange is placed so the sheet crosses the bare table, and each extracted centre is

@@ -8,21 +8,12 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
+#include "cellsight/plane.hpp"
 #include "cellsight/qr_code.hpp"
 #include "cellsight/raycaster.hpp"
 #include "cellsight/scene.hpp"
 
 namespace cellsight {
-
-/// A plane n·p + d = 0 with unit n.
-struct Plane {
-  Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
-  double d = 0.0;
-  double distance(const Eigen::Vector3d& p) const { return n.dot(p) + d; }
-};
-
-/// The light sheet (plane y = 0 of the laser frame) expressed in the frame of T_frame_laser.
-Plane laserPlane(const Eigen::Isometry3d& T_frame_laser);
 
 /// Every surface of a scene in one ray-casting structure, with per-geometry material data.
 class CellGeometry {

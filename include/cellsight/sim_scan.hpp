@@ -19,7 +19,6 @@ struct ScannerCalibration {
   CameraIntrinsics intrinsics;
   Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
-  double reference_z = 0.0;  ///< height of the support plane (table), base frame
   std::shared_ptr<const UndistortionMap> undistortion;  ///< built on first use when empty
   static ScannerCalibration fromScene(const Scene& scene);
 };

@@ -6,7 +6,7 @@
 
 #include "cellsight/camera_model.hpp"
 #include "cellsight/line_extraction.hpp"
-#include "cellsight/renderer.hpp"
+#include "cellsight/plane.hpp"
 
 namespace cellsight {
 

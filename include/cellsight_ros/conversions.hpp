@@ -14,7 +14,7 @@
 
 #include "cellsight/calibration.hpp"
 #include "cellsight/camera_model.hpp"
-#include "cellsight/renderer.hpp"
+#include "cellsight/plane.hpp"
 #include "cellsight/scan_cloud.hpp"
 #include "cellsight/LaserPlaneStamped.h"
 

@@ -24,7 +24,4 @@ void param(const ros::NodeHandle& nh, const std::string& name, T& value) {
   nh.param(name, value, value);
 }
 
-/// `$(find cellsight)` resolved at run time: the package's source folder.
-std::string packagePath();
-
 }  // namespace cellsight_ros

@@ -7,13 +7,6 @@
 
 namespace cellsight {
 
-Plane laserPlane(const Eigen::Isometry3d& T_frame_laser) {
-  Plane p;
-  p.n = T_frame_laser.linear().col(1);
-  p.d = -p.n.dot(T_frame_laser.translation());
-  return p;
-}
-
 // ---------------------------------------------------------------- noise
 namespace {
 const std::array<float, 65536>& gaussianTable() {

@@ -10,7 +10,6 @@ ScannerCalibration ScannerCalibration::fromScene(const Scene& s) {
   c.intrinsics = s.scanner_camera.intrinsics;
   c.T_base_camera = s.scanner_camera.T_base_camera;
   c.T_flange_laser = s.laser.T_flange_laser;
-  c.reference_z = s.table.z;
   c.undistortion = std::make_shared<UndistortionMap>(c.intrinsics);
   return c;
 }
