@@ -9,13 +9,14 @@
 #include "cellsight/calibration.hpp"
 #include "cellsight/errors.hpp"
 #include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/node.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
 
 class CalibrationPublisher {
  public:
-  explicit CalibrationPublisher(ros::NodeHandle& pnh) {
+  CalibrationPublisher(ros::NodeHandle&, ros::NodeHandle& pnh) {
     folder_ = cellsight_ros::requireParam<std::string>(
         pnh, "calibration_dir", "folder of calibration YAML files, e.g. config/calibration");
     double wait_seconds = 0.0;
@@ -77,14 +78,5 @@ class CalibrationPublisher {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "calibration_publisher");
-  ros::NodeHandle pnh("~");
-  try {
-    CalibrationPublisher node(pnh);
-    ros::spin();
-  } catch (const std::exception& e) {
-    ROS_FATAL("calibration_publisher cannot start: %s", e.what());
-    return 1;
-  }
-  return 0;
+  return cellsight_ros::runNode<CalibrationPublisher>(argc, argv, "calibration_publisher");
 }

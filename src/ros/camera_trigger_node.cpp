@@ -28,6 +28,7 @@
 #include "cellsight/ground_truth.hpp"
 #include "cellsight/trajectory.hpp"
 #include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/node.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -412,17 +413,6 @@ class CameraTrigger {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "camera_trigger");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    // The goal callback runs the whole scan; other callbacks need threads of their own.
-    ros::AsyncSpinner spinner(3);
-    CameraTrigger trigger(nh, pnh);
-    spinner.start();
-    ros::waitForShutdown();
-  } catch (const std::exception& e) {
-    ROS_FATAL("camera_trigger cannot start: %s", e.what());
-    return 1;
-  }
-  return 0;
+  // The goal callback runs the whole scan; the I/O and image callbacks need threads of their own.
+  return cellsight_ros::runNode<CameraTrigger>(argc, argv, "camera_trigger", 3);
 }

@@ -20,6 +20,7 @@
 #include "cellsight/renderer.hpp"
 #include "cellsight/scene.hpp"
 #include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/node.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -340,16 +341,6 @@ class CellSim {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "cell_sim");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    CellSim sim(nh, pnh);
-    ros::AsyncSpinner spinner(3);  // rendering must not stall the flange tf or the I/O
-    spinner.start();
-    ros::waitForShutdown();
-  } catch (const std::exception& e) {
-    ROS_FATAL("cell_sim cannot start: %s", e.what());
-    return 1;
-  }
-  return 0;
+  // Rendering must not stall the flange tf or the I/O.
+  return cellsight_ros::runNode<CellSim>(argc, argv, "cell_sim", 3);
 }

@@ -6,6 +6,7 @@
 #include "cellsight/ClusterArray.h"
 #include "cellsight/clustering.hpp"
 #include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/node.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -85,14 +86,5 @@ class Clustering {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "clustering");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    Clustering node(nh, pnh);
-    ros::spin();
-  } catch (const std::exception& e) {
-    ROS_FATAL("clustering cannot start: %s", e.what());
-    return 1;
-  }
-  return 0;
+  return cellsight_ros::runNode<Clustering>(argc, argv, "clustering");
 }

@@ -11,6 +11,7 @@
 #include <tf2_ros/transform_listener.h>
 
 #include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/node.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -64,14 +65,5 @@ class LaserPlaneTracker {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "laser_plane_tracker");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    LaserPlaneTracker node(nh, pnh);
-    ros::spin();
-  } catch (const std::exception& e) {
-    ROS_FATAL("laser_plane_tracker cannot start: %s", e.what());
-    return 1;
-  }
-  return 0;
+  return cellsight_ros::runNode<LaserPlaneTracker>(argc, argv, "laser_plane_tracker");
 }

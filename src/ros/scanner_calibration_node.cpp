@@ -12,6 +12,7 @@
 #include "cellsight/CalibrateLaser.h"
 #include "cellsight/calibrate.hpp"
 #include "cellsight/calibration.hpp"
+#include "cellsight_ros/node.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -126,14 +127,5 @@ class ScannerCalibration {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "scanner_calibration");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    ScannerCalibration node(nh, pnh);
-    ros::spin();
-  } catch (const std::exception& e) {
-    ROS_FATAL("scanner_calibration cannot start: %s", e.what());
-    return 1;
-  }
-  return 0;
+  return cellsight_ros::runNode<ScannerCalibration>(argc, argv, "scanner_calibration");
 }

@@ -20,6 +20,7 @@
 #include "cellsight/sim_scan.hpp"
 #include "cellsight/triangulation.hpp"
 #include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/node.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -230,16 +231,6 @@ class Triangulation {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "triangulation");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    Triangulation node(nh, pnh);
-    ros::AsyncSpinner spinner(3);
-    spinner.start();
-    ros::waitForShutdown();
-  } catch (const std::exception& e) {
-    ROS_FATAL("triangulation cannot start: %s", e.what());
-    return 1;
-  }
-  return 0;
+  // scan/finish waits for frames that other callbacks process.
+  return cellsight_ros::runNode<Triangulation>(argc, argv, "triangulation", 3);
 }
