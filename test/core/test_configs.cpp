@@ -28,14 +28,9 @@ std::vector<std::string> listDir(const std::string& dir) {
 std::string sceneError(const std::string& yaml_text) {
   const std::string dir = cellsight_test::tempDir();
   cellsight_test::writeText(dir + "/scene.yaml", yaml_text);
-  try {
-    SceneLoadOptions opt;
-    opt.model_paths = {kConfig + "/models", dir};
-    loadScene(dir + "/scene.yaml", opt);
-  } catch (const ConfigError& e) {
-    return e.what();
-  }
-  return "";
+  SceneLoadOptions opt;
+  opt.model_paths = {kConfig + "/models", dir};
+  return cellsight_test::errorOf([&] { loadScene(dir + "/scene.yaml", opt); });
 }
 
 const char* kGoodScene = R"(
@@ -93,12 +88,8 @@ TEST(ShippedConfig, ScannerSettingsLoadAndTypoIsNamed) {
   EXPECT_EQ(s.line.smoothing_degree, 2);
   const std::string dir = cellsight_test::tempDir();
   cellsight_test::writeText(dir + "/s.yaml", "line: {estimater: centroid}\n");
-  try {
-    loadScannerSettings(dir + "/s.yaml");
-    FAIL();
-  } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("line.estimater: unknown key"), std::string::npos) << e.what();
-  }
+  const std::string msg = cellsight_test::errorOf([&] { loadScannerSettings(dir + "/s.yaml"); });
+  EXPECT_NE(msg.find("line.estimater: unknown key"), std::string::npos) << msg;
 }
 
 TEST(BadConfig, GoodBaseSceneLoads) { EXPECT_EQ(sceneError(kGoodScene), ""); }
@@ -125,14 +116,8 @@ TEST(BadConfig, MissingModelAndMeshAreNamed) {
   const std::string dir = cellsight_test::tempDir();
   cellsight::makeDirs(dir + "/ghost");
   cellsight_test::writeText(dir + "/ghost/model.yaml", "id: ghost\nmesh: ghost.ply\n");
-  EXPECT_NE(([&] {
-              try {
-                loadModelInfo(dir + "/ghost/model.yaml");
-              } catch (const ConfigError& e) {
-                return std::string(e.what());
-              }
-              return std::string();
-            })().find("model.yaml: mesh: file"), std::string::npos);
+  EXPECT_NE(cellsight_test::errorOf([&] { loadModelInfo(dir + "/ghost/model.yaml"); }).find("model.yaml: mesh: file"),
+            std::string::npos);
 }
 
 TEST(BadConfig, NonManifoldMeshIsNamed) {

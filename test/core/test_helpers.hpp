@@ -5,6 +5,7 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <string>
 
 #include "cellsight/ground_truth.hpp"
@@ -12,6 +13,16 @@
 #include "cellsight/scene.hpp"
 
 namespace cellsight_test {
+
+/// The message of the exception `f` throws ("" when it throws nothing).
+inline std::string errorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
 
 inline std::string tempDir() {
   char tmpl[] = "/tmp/cellsight_test_XXXXXX";

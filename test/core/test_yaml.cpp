@@ -8,21 +8,12 @@
 using cellsight::ConfigError;
 using cellsight::YamlMap;
 
-namespace {
-std::string messageOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "";
-}
-}  // namespace
+using cellsight_test::errorOf;
 
 TEST(Yaml, UnknownKeyIsReportedWithFileAndPath) {
   const std::string dir = cellsight_test::tempDir();
   cellsight_test::writeText(dir + "/a.yaml", "outer: {inner: 1, typo: 2}\n");
-  const std::string msg = messageOf([&] {
+  const std::string msg = errorOf([&] {
     YamlMap m(cellsight::loadYamlFile(dir + "/a.yaml"), dir + "/a.yaml");
     YamlMap o = m.getMap("outer");
     o.getInt("inner");
@@ -35,7 +26,7 @@ TEST(Yaml, UnknownKeyIsReportedWithFileAndPath) {
 TEST(Yaml, SyntaxErrorNamesFileAndLine) {
   const std::string dir = cellsight_test::tempDir();
   cellsight_test::writeText(dir + "/b.yaml", "a: 1\nb: [1, 2\nc: 3\n");
-  const std::string msg = messageOf([&] { cellsight::loadYamlFile(dir + "/b.yaml"); });
+  const std::string msg = errorOf([&] { cellsight::loadYamlFile(dir + "/b.yaml"); });
   EXPECT_NE(msg.find("b.yaml"), std::string::npos) << msg;
   EXPECT_NE(msg.find("line"), std::string::npos) << msg;
 }
@@ -43,9 +34,9 @@ TEST(Yaml, SyntaxErrorNamesFileAndLine) {
 TEST(Yaml, WrongTypeAndMissingKeyAreNamed) {
   YAML::Node n = YAML::Load("x: hello\nv: [1, 2]\n");
   YamlMap m(n, "f.yaml");
-  EXPECT_NE(messageOf([&] { m.getDouble("x"); }).find("f.yaml: x: expected a number"), std::string::npos);
-  EXPECT_NE(messageOf([&] { m.getVector3("v"); }).find("expected 3 numbers"), std::string::npos);
-  EXPECT_NE(messageOf([&] { m.getInt("missing"); }).find("missing: required key is missing"),
+  EXPECT_NE(errorOf([&] { m.getDouble("x"); }).find("f.yaml: x: expected a number"), std::string::npos);
+  EXPECT_NE(errorOf([&] { m.getVector3("v"); }).find("expected 3 numbers"), std::string::npos);
+  EXPECT_NE(errorOf([&] { m.getInt("missing"); }).find("missing: required key is missing"),
             std::string::npos);
 }
 
@@ -85,6 +76,6 @@ TEST(Calibration, TransformRoundTripAndCorruptFileKeepsOld) {
   EXPECT_THROW(cellsight::writeFileAtomic(dir + "/missing/x.yaml", "a: 1\n"), std::runtime_error);
   // A corrupt calibration in a folder is refused with the file named.
   cellsight_test::writeText(dir + "/bad.yaml", "parent_frame: base_link\nchild_frame: base_link\ntransform: {xyz: [0,0,0]}\n");
-  const std::string msg = messageOf([&] { cellsight::loadCalibrationFolder(dir); });
+  const std::string msg = errorOf([&] { cellsight::loadCalibrationFolder(dir); });
   EXPECT_NE(msg.find("bad.yaml: child_frame"), std::string::npos) << msg;
 }
