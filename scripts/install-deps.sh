@@ -21,7 +21,7 @@ PACKAGES=(
   rviz
   # core libraries
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libembree-dev libtbb-dev
-  libqrencode-dev libzbar-dev libpcl-dev libpcl-conversions-dev
+  libqrencode-dev libzbar-dev libpcl-dev libpcl-conversions-dev libopen3d-dev
   # headless rviz screenshots
   xvfb x11-utils imagemagick libgl1-mesa-dri mesa-utils
 )

@@ -12,9 +12,10 @@
 namespace cellsight {
 
 struct Symmetry {
-  enum class Type { kNone, kAxial, kDiscrete } type = Type::kNone;
+  enum class Type { kNone, kAxial, kDiscrete, kSpherical } type = Type::kNone;
   Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();  ///< in the model frame
   int order = 1;                                    ///< discrete: rotations by 2π/order
+  // spherical: any rotation about the model's centroid leaves it unchanged (axis unused)
 };
 
 /// Part model metadata; the model frame is the mesh frame.

@@ -121,8 +121,10 @@ ModelInfo loadModelInfo(const std::string& path) {
       info.symmetry.type = Symmetry::Type::kDiscrete;
       info.symmetry.order = s.getInt("order");
       if (info.symmetry.order < 2) s.fail("order", "discrete symmetry needs order >= 2");
+    } else if (type == "spherical") {
+      info.symmetry.type = Symmetry::Type::kSpherical;
     } else {
-      s.fail("type", "must be none, axial or discrete (got '" + type + "')");
+      s.fail("type", "must be none, axial, discrete or spherical (got '" + type + "')");
     }
     info.symmetry.axis = unitVector(s, "axis", Eigen::Vector3d::UnitZ());
     s.finish();

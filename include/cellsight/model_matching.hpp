@@ -1,0 +1,123 @@
+// Model matching (thesis Algorithm 5.1, done well): FPFH descriptor correspondences (mutual
+// filter), RANSAC on 3-point hypotheses with cheap pre-rejection (edge lengths, normals) and
+// scoring against a precomputed distance field of the model, robust point-to-plane ICP, and
+// validation by fitness over the model's *visible* surface (single-view scans see a part from
+// one side), scene coverage and RMSE. Symmetric parts are reported in a canonical pose.
+// PCL and Embree stay inside model_matching.cpp.
+#pragma once
+#include <Eigen/Geometry>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "cellsight/model_library.hpp"
+#include "cellsight/scan_cloud.hpp"
+
+namespace cellsight {
+
+struct MatchingConfig {
+  double voxel = 0.002;            ///< m, coarse resolution of scene and model for descriptors
+  double normal_radius = 0.005;    ///< m, scene normals
+  double feature_radius = 0.010;   ///< m, FPFH support
+  bool mutual_filter = true;       ///< keep descriptor matches that are nearest both ways
+  int min_correspondences = 12;    ///< below this the mutual filter is relaxed to one-way
+  /// Coarse alignment: "ppf" (point pair feature voting, default), "ransac" (FPFH
+  /// correspondences + RANSAC, the thesis's method) or "fgr" (FPFH + fast global registration).
+  std::string coarse = "ppf";
+  double ppf_sampling = 0.0035;      ///< m, points of model and scene paired
+  double ppf_distance_step = 0.003;  ///< m, pair distance quantisation
+  int ppf_angle_bins = 30;           ///< angle quantisation (12°) and rotation bins
+  int ppf_ref_step = 2;              ///< every n-th scene point is a reference
+  int ppf_candidates = 40;           ///< best-voted poses scored on the distance field
+  int max_iterations = 100000;     ///< RANSAC hypotheses at most
+  double confidence = 0.999;       ///< adaptive RANSAC termination
+  double edge_similarity = 0.9;    ///< pre-rejection: edge length ratio scene/model
+  double normal_tolerance = 0.5;   ///< rad, pre-rejection normal consistency
+  double inlier_distance = 0.003;  ///< m, coarse inlier threshold (≈ 1.5 voxel)
+  int refine_candidates = 3;       ///< distinct coarse hypotheses refined by ICP per model
+  double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
+  int icp_iterations = 40;
+  double icp_max_points = 4000;    ///< scene points used by ICP (thinned evenly above this)
+  double fitness_radius = 0.002;   ///< m, r_F
+  double min_fitness = 0.35;       ///< share of the model's visible points matched (laser shadows hide some)
+  double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)
+  double max_rmse = 0.0015;        ///< m, point-to-plane RMS of the inliers
+  bool check_visibility = true;    ///< fitness over points the viewpoint can see
+  Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
+  double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
+  int max_instances = 3;           ///< detections per cluster (touching parts)
+  int min_instance_points = 60;    ///< leftover cluster points worth another search
+  int threads = 0;                 ///< 0: hardware concurrency
+  uint64_t seed = 42;
+};
+
+struct Detection {
+  std::string model;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< T_scene_model (canonical)
+  double fitness = 0;    ///< share of visible model points within r_F of the scene
+  double coverage = 0;   ///< share of the cluster's points explained by the model
+  double rmse = 0;       ///< m
+  double score = 0;      ///< fitness × coverage (ranking)
+  int cluster = -1;      ///< index of the input cluster
+  int iterations = 0;    ///< RANSAC hypotheses drawn
+  std::string matcher;   ///< the coarse stage: "ppf", "ransac" or "fgr"
+};
+
+struct MatchStats {
+  double seconds = 0;
+  size_t pairs = 0, pairs_skipped_by_size = 0;
+  std::vector<Detection> rejected;  ///< best pose per (cluster, model) that failed validation
+  std::vector<std::string> warnings;
+};
+
+/// Symmetry-aware pose error about the model centroid: translation of the centroid (m) and
+/// rotation (rad; none: full, discrete: best of the n equivalent rotations, axial: angle between
+/// the axes, spherical: 0).
+struct PoseError {
+  double translation = 0, rotation = 0;
+};
+PoseError poseError(const ModelInfo& info, const Eigen::Vector3d& centroid, const Eigen::Isometry3d& estimate,
+                    const Eigen::Isometry3d& truth);
+
+/// The canonical representative of a symmetric pose: axial and discrete symmetries turn about
+/// the model's axis (through its origin) so that the model x axis points as close to the scene
+/// +x as the symmetry allows; spherical ones keep the centre and take the identity rotation.
+Eigen::Isometry3d canonicalPose(const ModelInfo& info, const Eigen::Vector3d& centroid, const Eigen::Isometry3d& pose);
+
+class ModelMatcher {
+ public:
+  ModelMatcher(std::shared_ptr<const ModelLibrary> library, const MatchingConfig& config);
+  ~ModelMatcher();
+
+  const MatchingConfig& config() const { return config_; }
+
+  /// Finds instances of `models` (empty: all) in each cluster; clusters × models run in
+  /// parallel. Throws std::out_of_range for an unknown model id (before any work). Empty or
+  /// all-NaN clusters give a warning and no detection.
+  std::vector<Detection> locate(const std::vector<ScanCloud>& clusters, const std::vector<std::string>& models,
+                                MatchStats* stats = nullptr) const;
+
+  /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
+  /// first locate(); unknown ids throw std::out_of_range.
+  void prepare(const std::vector<std::string>& models) const;
+
+  /// Centroid of the model's surface (model frame), for errors and grasping.
+  Eigen::Vector3d centroid(const std::string& model) const;
+
+  struct ModelIndex;  // per-model data built once: clouds, descriptors, distance field, ray caster
+
+ private:
+  std::shared_ptr<const ModelIndex> index(const std::string& id) const;
+
+  std::shared_ptr<const ModelLibrary> library_;
+  MatchingConfig config_;
+  mutable std::mutex mutex_;
+  mutable std::map<std::string, std::shared_ptr<const ModelIndex>> indices_;
+};
+
+/// Strict loader of config/matching.yaml (ConfigError names file and key).
+MatchingConfig loadMatchingConfig(const std::string& path);
+
+}  // namespace cellsight

@@ -1,0 +1,1004 @@
+// PCL-heavy translation unit: scene normals and FPFH, descriptor k-d trees, exact nearest
+// neighbours for the last ICP iterations and for fitness. The RANSAC scoring and most ICP
+// iterations use a distance field of the model (O(1) per point) built once per model.
+#include "cellsight/model_matching.hpp"
+
+#include <pcl/features/fpfh.h>
+#include <pcl/features/normal_3d.h>
+#include <pcl/filters/voxel_grid.h>
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_types.h>
+#include <pcl/search/kdtree.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <stdexcept>
+#include <thread>
+
+#include "cellsight/errors.hpp"
+#include "cellsight/fgr.hpp"
+#include "cellsight/raycaster.hpp"
+#include "cellsight/yaml_reader.hpp"
+
+namespace cellsight {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using Vec3 = Eigen::Vector3f;
+
+double seconds(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
+
+template <typename Fn>
+void parallelFor(size_t n, int threads, Fn fn) {
+  const int t = std::max(1, std::min<int>(threads, static_cast<int>(n)));
+  if (t <= 1) {
+    for (size_t i = 0; i < n; ++i) fn(i);
+    return;
+  }
+  std::atomic<size_t> next{0};
+  std::vector<std::thread> pool;
+  for (int k = 0; k < t; ++k) {
+    pool.emplace_back([&] {
+      for (size_t i = next++; i < n; i = next++) fn(i);
+    });
+  }
+  for (auto& th : pool) th.join();
+}
+
+pcl::PointCloud<pcl::PointXYZ>::Ptr toXyz(const std::vector<Vec3>& pts) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr c(new pcl::PointCloud<pcl::PointXYZ>);
+  c->resize(pts.size());
+  for (size_t i = 0; i < pts.size(); ++i) (*c)[i].getVector3fMap() = pts[i];
+  c->width = static_cast<uint32_t>(pts.size());
+  c->height = 1;
+  return c;
+}
+
+pcl::PointCloud<pcl::FPFHSignature33>::Ptr toPclFpfh(const std::vector<Fpfh>& f) {
+  pcl::PointCloud<pcl::FPFHSignature33>::Ptr c(new pcl::PointCloud<pcl::FPFHSignature33>);
+  c->resize(f.size());
+  for (size_t i = 0; i < f.size(); ++i) std::copy(f[i].begin(), f[i].end(), (*c)[i].histogram);
+  return c;
+}
+
+bool validFpfh(const Fpfh& f) {
+  float s = 0;
+  for (float v : f) {
+    if (!std::isfinite(v)) return false;
+    s += v;
+  }
+  return s > 0;
+}
+
+/// Regular grid over the model's neighbourhood: per cell, the index of the fine model point
+/// nearest to the cell centre (−1 outside the margin).
+struct DistanceField {
+  Vec3 origin = Vec3::Zero();
+  float cell = 0.001f;
+  Eigen::Vector3i dims = Eigen::Vector3i::Zero();
+  std::vector<int32_t> nearest;
+  int lookup(const Vec3& q) const {
+    const Eigen::Vector3f g = (q - origin) / cell;
+    if (!(g.x() >= 0 && g.y() >= 0 && g.z() >= 0 && g.x() < dims.x() && g.y() < dims.y() && g.z() < dims.z())) return -1;
+    const int x = static_cast<int>(g.x()), y = static_cast<int>(g.y()), z = static_cast<int>(g.z());
+    return nearest[(static_cast<size_t>(z) * dims.y() + y) * dims.x() + x];
+  }
+};
+
+
+/// Thins a cloud with normals to one point per cell (the first one met).
+ScanCloud thinned(const ScanCloud& c, double cell) {
+  std::vector<std::pair<std::tuple<int, int, int>, int>> keys;
+  keys.reserve(c.size());
+  for (size_t i = 0; i < c.size(); ++i) {
+    const Vec3 g = c.points[i] / static_cast<float>(cell);
+    keys.push_back({{static_cast<int>(std::floor(g.x())), static_cast<int>(std::floor(g.y())), static_cast<int>(std::floor(g.z()))},
+                    static_cast<int>(i)});
+  }
+  std::stable_sort(keys.begin(), keys.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  ScanCloud out;
+  out.frame_id = c.frame_id;
+  for (size_t k = 0; k < keys.size(); ++k) {
+    if (k > 0 && keys[k].first == keys[k - 1].first) continue;
+    out.append(c.points[keys[k].second], 0.f);
+    out.normals.push_back(c.normals[keys[k].second]);
+  }
+  return out;
+}
+
+/// Point pair feature hash table of a model: key → (reference point, angle α_m of the pair
+/// about the reference normal).
+struct PpfTable {
+  float dist_step = 0.003f;
+  int angle_bins = 30;
+  struct Entry {
+    int32_t ref;
+    float alpha;
+  };
+  std::vector<uint64_t> keys;  // sorted
+  std::vector<Entry> entries;  // same order
+  std::pair<size_t, size_t> range(uint64_t key) const {
+    auto lo = std::lower_bound(keys.begin(), keys.end(), key);
+    auto hi = std::upper_bound(lo, keys.end(), key);
+    return {static_cast<size_t>(lo - keys.begin()), static_cast<size_t>(hi - keys.begin())};
+  }
+};
+
+/// Transform taking p to the origin and n onto +x.
+Eigen::Isometry3f toLocalFrame(const Vec3& p, const Vec3& n) {
+  Eigen::Isometry3f T = Eigen::Isometry3f::Identity();
+  T.linear() = Eigen::Quaternionf::FromTwoVectors(n, Vec3::UnitX()).toRotationMatrix();
+  T.translation() = -(T.linear() * p);
+  return T;
+}
+
+float pairAlpha(const Eigen::Isometry3f& local, const Vec3& p2) {
+  const Vec3 q = local * p2;
+  return std::atan2(-q.z(), q.y());
+}
+
+bool ppfKey(const Vec3& p1, const Vec3& n1, const Vec3& p2, const Vec3& n2, float dist_step, int bins, uint64_t* key) {
+  const Vec3 d = p2 - p1;
+  const float len = d.norm();
+  if (len < 1e-6f) return false;
+  const Vec3 du = d / len;
+  const float k = bins / static_cast<float>(M_PI);
+  auto q = [&](float c) { return std::min(bins - 1, static_cast<int>(std::acos(std::clamp(c, -1.f, 1.f)) * k)); };
+  const uint64_t f1 = static_cast<uint64_t>(len / dist_step);
+  *key = (((f1 * bins + q(n1.dot(du))) * bins + q(n2.dot(du))) * bins) + q(n1.dot(n2));
+  return true;
+}
+
+PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins) {
+  PpfTable t;
+  t.dist_step = dist_step;
+  t.angle_bins = bins;
+  std::vector<std::pair<uint64_t, PpfTable::Entry>> all;
+  all.reserve(c.size() * (c.size() - 1));
+  for (size_t i = 0; i < c.size(); ++i) {
+    const Eigen::Isometry3f L = toLocalFrame(c.points[i], c.normals[i]);
+    for (size_t j = 0; j < c.size(); ++j) {
+      uint64_t key;
+      if (i == j || !ppfKey(c.points[i], c.normals[i], c.points[j], c.normals[j], dist_step, bins, &key)) continue;
+      all.push_back({key, {static_cast<int32_t>(i), pairAlpha(L, c.points[j])}});
+    }
+  }
+  std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  // Features shared by very many pairs (two points on one large flat face differ only in their
+  // distance) say little about the pose and cost most of the voting: leave them out.
+  const size_t max_bucket = std::max<size_t>(256, all.size() / 4000);
+  t.keys.reserve(all.size());
+  t.entries.reserve(all.size());
+  for (size_t a = 0; a < all.size();) {
+    size_t b = a;
+    while (b < all.size() && all[b].first == all[a].first) ++b;
+    if (b - a <= max_bucket) {
+      for (size_t k = a; k < b; ++k) {
+        t.keys.push_back(all[k].first);
+        t.entries.push_back(all[k].second);
+      }
+    }
+    a = b;
+  }
+  return t;
+}
+
+}  // namespace
+
+struct ModelMatcher::ModelIndex {
+  std::string id;
+  ModelInfo info;
+  std::shared_ptr<const ScanCloud> coarse;  // at config.voxel, PCA normals (as a scan sees them)
+  std::vector<Fpfh> fpfh;                   // of coarse (invalid ones zeroed)
+  pcl::KdTreeFLANN<pcl::FPFHSignature33> fpfh_tree;
+  std::vector<int> fpfh_valid;              // coarse indices with a valid descriptor
+  std::shared_ptr<const ScanCloud> fine;    // at config.icp_spacing
+  pcl::KdTreeFLANN<pcl::PointXYZ> fine_tree;
+  DistanceField field;
+  ScanCloud ppf_cloud;  // coarse cloud thinned to ppf_sampling
+  PpfTable ppf;         // its point pair features (Drost et al. 2010)
+  RayCaster caster;  // the mesh in the model frame (self-occlusion)
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  float diameter = 0;
+};
+
+namespace {
+
+/// One cluster prepared once for every model: coarse points with normals and FPFH, the points
+/// ICP uses, and a k-d tree over all its points for the fitness test.
+struct SceneData {
+  std::vector<Vec3> all;       // finite input points
+  ScanCloud coarse;            // voxelised, normals toward the viewpoint
+  std::vector<Fpfh> fpfh;
+  std::vector<int> fpfh_valid;
+  pcl::KdTreeFLANN<pcl::FPFHSignature33> fpfh_tree;
+  ScanCloud ppf;               // coarse thinned to ppf_sampling
+  std::vector<Vec3> icp_points;
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree;  // over `all`
+  float diameter = 0;  // lower bound of the largest point distance
+};
+
+std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const MatchingConfig& cfg) {
+  auto s = std::make_unique<SceneData>();
+  s->all = finite;
+  auto all = toXyz(finite);
+  pcl::VoxelGrid<pcl::PointXYZ> vg;
+  vg.setInputCloud(all);
+  const float leaf = static_cast<float>(cfg.voxel);
+  vg.setLeafSize(leaf, leaf, leaf);
+  pcl::PointCloud<pcl::PointXYZ>::Ptr coarse(new pcl::PointCloud<pcl::PointXYZ>);
+  vg.filter(*coarse);
+  pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+  ne.setInputCloud(coarse);
+  ne.setSearchSurface(all);
+  ne.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+  ne.setRadiusSearch(cfg.normal_radius);
+  ne.setViewPoint(cfg.viewpoint.x(), cfg.viewpoint.y(), cfg.viewpoint.z());
+  pcl::PointCloud<pcl::Normal> normals;
+  ne.compute(normals);
+  pcl::PointCloud<pcl::PointXYZ>::Ptr kept(new pcl::PointCloud<pcl::PointXYZ>);
+  pcl::PointCloud<pcl::Normal>::Ptr kept_n(new pcl::PointCloud<pcl::Normal>);
+  for (size_t i = 0; i < coarse->size(); ++i) {
+    if (!std::isfinite(normals[i].normal_x)) continue;
+    kept->push_back((*coarse)[i]);
+    kept_n->push_back(normals[i]);
+    s->coarse.append((*coarse)[i].getVector3fMap(), 0.f);
+    s->coarse.normals.push_back(normals[i].getNormalVector3fMap().normalized());
+  }
+  if (kept->empty()) return s;
+  s->ppf = thinned(s->coarse, cfg.ppf_sampling);
+  s->tree.setInputCloud(all);
+  const size_t cap = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
+  const size_t step = std::max<size_t>(1, (finite.size() + cap - 1) / cap);
+  for (size_t i = 0; i < finite.size(); i += step) s->icp_points.push_back(finite[i]);
+  // a lower bound of the largest distance between two points (two farthest-point sweeps)
+  auto farthest = [&](const Vec3& from) {
+    size_t best = 0;
+    float d = -1;
+    for (size_t i = 0; i < s->coarse.size(); ++i) {
+      const float di = (s->coarse.points[i] - from).squaredNorm();
+      if (di > d) {
+        d = di;
+        best = i;
+      }
+    }
+    return s->coarse.points[best];
+  };
+  const Vec3 b = farthest(s->coarse.points[0]), c = farthest(b);
+  s->diameter = (b - c).norm();
+  if (cfg.coarse == "ppf") return s;
+  pcl::FPFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::FPFHSignature33> fe;
+  fe.setInputCloud(kept);
+  fe.setInputNormals(kept_n);
+  fe.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+  fe.setRadiusSearch(cfg.feature_radius);
+  pcl::PointCloud<pcl::FPFHSignature33> f;
+  fe.compute(f);
+  s->fpfh.resize(f.size());
+  std::vector<Fpfh> valid;
+  for (size_t i = 0; i < f.size(); ++i) {
+    std::copy(f[i].histogram, f[i].histogram + 33, s->fpfh[i].begin());
+    if (validFpfh(s->fpfh[i])) {
+      s->fpfh_valid.push_back(static_cast<int>(i));
+      valid.push_back(s->fpfh[i]);
+    }
+  }
+  if (!valid.empty()) s->fpfh_tree.setInputCloud(toPclFpfh(valid));
+  return s;
+}
+
+struct Correspondence {
+  int scene, model;
+};
+
+std::vector<Correspondence> correspondences(const SceneData& s, const ModelMatcher::ModelIndex& m,
+                                            const MatchingConfig& cfg) {
+  std::vector<Correspondence> one_way, mutual;
+  if (s.fpfh_valid.empty() || m.fpfh_valid.empty()) return one_way;
+  pcl::FPFHSignature33 q;
+  std::vector<int> idx(1);
+  std::vector<float> d2(1);
+  for (int si : s.fpfh_valid) {
+    std::copy(s.fpfh[si].begin(), s.fpfh[si].end(), q.histogram);
+    if (m.fpfh_tree.nearestKSearch(q, 1, idx, d2) < 1) continue;
+    const int mi = m.fpfh_valid[idx[0]];
+    one_way.push_back({si, mi});
+    if (!cfg.mutual_filter) continue;
+    std::copy(m.fpfh[mi].begin(), m.fpfh[mi].end(), q.histogram);
+    if (s.fpfh_tree.nearestKSearch(q, 1, idx, d2) == 1 && s.fpfh_valid[idx[0]] == si) mutual.push_back({si, mi});
+  }
+  if (cfg.mutual_filter && static_cast<int>(mutual.size()) >= cfg.min_correspondences) return mutual;
+  return one_way;
+}
+
+struct Hypothesis {
+  Eigen::Isometry3f T = Eigen::Isometry3f::Identity();  // model → scene
+  int score = 0;
+};
+
+/// Counts scene points explained by the model under T (model → scene), with early exit when
+/// the first `probe` points already promise less than `floor`.
+int scoreHypothesis(const SceneData& s, const std::vector<int>& order, const ModelMatcher::ModelIndex& m,
+                    const Eigen::Isometry3f& T, float inlier2, float cos_normal, int probe, double floor_share) {
+  const Eigen::Isometry3f Ti = T.inverse();
+  const Eigen::Matrix3f Rt = Ti.linear();
+  const auto& fp = m.fine->points;
+  const auto& fn = m.fine->normals;
+  int count = 0;
+  for (size_t k = 0; k < order.size(); ++k) {
+    if (static_cast<int>(k) == probe && count < floor_share * probe) return count * static_cast<int>(order.size()) / probe;
+    const int i = order[k];
+    const Vec3 q = Ti * s.coarse.points[i];
+    const int j = m.field.lookup(q);
+    if (j < 0) continue;
+    if ((q - fp[j]).squaredNorm() > inlier2) continue;
+    if ((Rt * s.coarse.normals[i]).dot(fn[j]) < cos_normal) continue;
+    ++count;
+  }
+  return count;
+}
+
+Eigen::Isometry3f kabsch(const Eigen::Matrix3f& model_pts, const Eigen::Matrix3f& scene_pts) {
+  Eigen::Isometry3f T = Eigen::Isometry3f::Identity();
+  T.matrix() = Eigen::umeyama(model_pts, scene_pts, false);
+  return T;
+}
+
+bool distinct(const Eigen::Isometry3f& a, const Eigen::Isometry3f& b, float dt) {
+  if ((a.translation() - b.translation()).norm() > dt) return true;
+  const Eigen::AngleAxisf d(a.linear().transpose() * b.linear());
+  return std::abs(d.angle()) > 0.2f;
+}
+
+std::vector<Hypothesis> ransac(const SceneData& s, const ModelMatcher::ModelIndex& m,
+                               const std::vector<Correspondence>& corr, const MatchingConfig& cfg, uint64_t seed,
+                               int* iterations) {
+  std::vector<Hypothesis> top;
+  *iterations = 0;
+  const int n = static_cast<int>(corr.size());
+  if (n < 3) return top;
+  std::mt19937_64 rng(seed);
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  std::vector<int> order(s.coarse.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::shuffle(order.begin(), order.end(), rng);
+  const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
+  const float cos_n = std::cos(0.8f);
+  const float cos_tol = std::cos(static_cast<float>(cfg.normal_tolerance));
+  const float min_edge = static_cast<float>(2 * cfg.voxel);
+  const float sim = static_cast<float>(cfg.edge_similarity);
+  const int probe = std::min<int>(64, static_cast<int>(order.size()));
+  const auto& sp = s.coarse.points;
+  const auto& sn = s.coarse.normals;
+  const auto& mp = m.coarse->points;
+  const auto& mn = m.coarse->normals;
+  long needed = cfg.max_iterations;
+  const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
+  for (long it = 0; it < std::min<long>(needed, cfg.max_iterations); ++it) {
+    ++*iterations;
+    int c[3] = {pick(rng), pick(rng), pick(rng)};
+    if (c[0] == c[1] || c[0] == c[2] || c[1] == c[2]) continue;
+    bool ok = true;
+    for (int a = 0; a < 3 && ok; ++a) {
+      const int b = (a + 1) % 3;
+      const Correspondence &A = corr[c[a]], &B = corr[c[b]];
+      const float ds = (sp[A.scene] - sp[B.scene]).norm(), dm = (mp[A.model] - mp[B.model]).norm();
+      if (ds < min_edge || std::min(ds, dm) < sim * std::max(ds, dm)) ok = false;
+      // the angle between the two normals is invariant under a rigid motion
+      else if (std::abs(sn[A.scene].dot(sn[B.scene]) - mn[A.model].dot(mn[B.model])) > 1 - cos_tol) ok = false;
+    }
+    if (!ok) continue;
+    Eigen::Matrix3f M, S;
+    for (int a = 0; a < 3; ++a) {
+      M.col(a) = mp[corr[c[a]].model];
+      S.col(a) = sp[corr[c[a]].scene];
+    }
+    const Eigen::Isometry3f T = kabsch(M, S);
+    for (int a = 0; a < 3 && ok; ++a) {
+      if ((T.linear() * mn[corr[c[a]].model]).dot(sn[corr[c[a]].scene]) < cos_tol) ok = false;
+    }
+    if (!ok) continue;
+    const double floor_share = top.empty() ? 0.0 : 0.5 * top.back().score / static_cast<double>(order.size());
+    const int score = scoreHypothesis(s, order, m, T, inl2, cos_n, probe, floor_share);
+    if (top.size() == keep && score <= top.back().score) continue;
+    // keep the best `keep` mutually distinct hypotheses, best first
+    bool merged = false;
+    for (auto& h : top) {
+      if (!distinct(h.T, T, static_cast<float>(2 * cfg.inlier_distance))) {
+        if (score > h.score) h = {T, score};
+        merged = true;
+        break;
+      }
+    }
+    if (!merged) top.push_back({T, score});
+    std::sort(top.begin(), top.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
+    if (top.size() > keep) top.resize(keep);
+    if (top.front().T.matrix() == T.matrix()) {
+      // adaptive termination from the share of descriptor matches this pose agrees with
+      int agree = 0;
+      for (const auto& cc : corr) agree += (T * mp[cc.model] - sp[cc.scene]).squaredNorm() < inl2;
+      const double w = std::max(agree, 3) / static_cast<double>(n);
+      const double p_all = w * w * w;
+      if (p_all >= 1.0) needed = it + 1;
+      else needed = std::max<long>(it + 1, static_cast<long>(std::ceil(std::log(1 - cfg.confidence) / std::log1p(-p_all))));
+    }
+  }
+  return top;
+}
+
+/// Drost-style voting: every `ref_step`-th scene point pairs with all scene points within the
+/// model's diameter; each pair's feature looks up model pairs; votes go to (model reference,
+/// rotation about the normal). One pose per scene reference, with its votes.
+std::vector<Hypothesis> ppfVoting(const ScanCloud& scene, const ModelMatcher::ModelIndex& m, int ref_step) {
+  const PpfTable& t = m.ppf;
+  const int bins = t.angle_bins;
+  const size_t M = m.ppf_cloud.size();
+  std::vector<Hypothesis> out;
+  if (M == 0 || scene.size() < 2) return out;
+  std::vector<int> acc(M * bins);
+  const float max_d2 = m.diameter * m.diameter;
+  const float to_bin = bins / static_cast<float>(2 * M_PI);
+  for (size_t r = 0; r < scene.size(); r += static_cast<size_t>(std::max(1, ref_step))) {
+    std::fill(acc.begin(), acc.end(), 0);
+    const Vec3 &pr = scene.points[r], &nr = scene.normals[r];
+    const Eigen::Isometry3f Ls = toLocalFrame(pr, nr);
+    for (size_t i = 0; i < scene.size(); ++i) {
+      if (i == r || (scene.points[i] - pr).squaredNorm() > max_d2) continue;
+      uint64_t key;
+      if (!ppfKey(pr, nr, scene.points[i], scene.normals[i], t.dist_step, bins, &key)) continue;
+      const auto [lo, hi] = t.range(key);
+      if (lo == hi) continue;
+      const float alpha_s = pairAlpha(Ls, scene.points[i]);
+      for (size_t e = lo; e < hi; ++e) {
+        float a = t.entries[e].alpha - alpha_s;
+        if (a < -M_PI) a += static_cast<float>(2 * M_PI);
+        if (a >= M_PI) a -= static_cast<float>(2 * M_PI);
+        const int b = std::min(bins - 1, static_cast<int>((a + static_cast<float>(M_PI)) * to_bin));
+        ++acc[static_cast<size_t>(t.entries[e].ref) * bins + b];
+      }
+    }
+    const auto best = std::max_element(acc.begin(), acc.end());
+    if (*best < 3) continue;
+    const size_t k = static_cast<size_t>(best - acc.begin());
+    const int mr = static_cast<int>(k / bins);
+    const float alpha = (static_cast<float>(k % bins) + 0.5f) / to_bin - static_cast<float>(M_PI);
+    const Eigen::Isometry3f Lm = toLocalFrame(m.ppf_cloud.points[mr], m.ppf_cloud.normals[mr]);
+    Hypothesis h;
+    h.T = Ls.inverse() * Eigen::AngleAxisf(alpha, Vec3::UnitX()) * Lm;
+    h.score = *best;
+    out.push_back(h);
+  }
+  return out;
+}
+
+/// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
+std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                                      int* iterations) {
+  std::vector<Hypothesis> votes = ppfVoting(s.ppf, m, cfg.ppf_ref_step);
+  *iterations = static_cast<int>(votes.size());
+  std::sort(votes.begin(), votes.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
+  if (votes.size() > static_cast<size_t>(cfg.ppf_candidates)) votes.resize(cfg.ppf_candidates);
+  std::vector<int> order(s.coarse.size());
+  std::iota(order.begin(), order.end(), 0);
+  const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
+  std::vector<Hypothesis> top;
+  const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
+  for (auto& v : votes) {
+    v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), static_cast<int>(order.size()) + 1, 0.0);
+    bool merged = false;
+    for (auto& h : top) {
+      if (!distinct(h.T, v.T, static_cast<float>(2 * cfg.inlier_distance))) {
+        if (v.score > h.score) h = v;
+        merged = true;
+        break;
+      }
+    }
+    if (!merged) top.push_back(v);
+  }
+  std::sort(top.begin(), top.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
+  if (top.size() > keep) top.resize(keep);
+  return top;
+}
+
+struct Refined {
+  Eigen::Isometry3f T = Eigen::Isometry3f::Identity();
+  double rmse = 0;
+};
+
+/// Robust point-to-plane ICP of the scene points onto the model (Huber weights, shrinking
+/// correspondence distance); distance-field correspondences, then exact ones.
+Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T0,
+            const MatchingConfig& cfg) {
+  Eigen::Isometry3d X = T0.inverse().cast<double>();  // scene → model
+  const auto& fp = m.fine->points;
+  const auto& fn = m.fine->normals;
+  double dmax = std::max(2 * cfg.inlier_distance, 4 * cfg.icp_spacing);
+  const double dmin = std::max(3 * cfg.icp_spacing, 0.5 * cfg.fitness_radius);
+  const int exact_iterations = 6;
+  double rmse = 0;
+  int exact_done = 0;
+  std::vector<int> idx(1);
+  std::vector<float> d2(1);
+  std::vector<double> res;
+  for (int it = 0; it < cfg.icp_iterations + exact_iterations; ++it) {
+    const bool exact = it >= cfg.icp_iterations || exact_done > 0;
+    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+    struct Row {
+      Eigen::Vector3d q, n;
+      double r;
+    };
+    std::vector<Row> rows;
+    rows.reserve(s.icp_points.size());
+    for (const auto& p : s.icp_points) {
+      const Eigen::Vector3d q = X * p.cast<double>();
+      int j;
+      if (exact) {
+        pcl::PointXYZ qq(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()));
+        if (m.fine_tree.nearestKSearch(qq, 1, idx, d2) < 1) continue;
+        j = idx[0];
+      } else {
+        j = m.field.lookup(q.cast<float>());
+        if (j < 0) continue;
+      }
+      const Eigen::Vector3d mp = fp[j].cast<double>(), n = fn[j].cast<double>();
+      if ((q - mp).norm() > dmax) continue;
+      rows.push_back({q, n, n.dot(q - mp)});
+    }
+    if (rows.size() < 6) break;
+    res.resize(rows.size());
+    for (size_t i = 0; i < rows.size(); ++i) res[i] = std::abs(rows[i].r);
+    std::nth_element(res.begin(), res.begin() + res.size() / 2, res.end());
+    const double sigma = std::max(1.4826 * res[res.size() / 2], 1e-5);
+    const double huber = 1.5 * sigma;
+    double ss = 0;
+    for (const auto& row : rows) {
+      const double w = std::abs(row.r) <= huber ? 1.0 : huber / std::abs(row.r);
+      Eigen::Matrix<double, 6, 1> J;
+      J << row.q.cross(row.n), row.n;
+      A += w * J * J.transpose();
+      b -= w * J * row.r;
+      ss += row.r * row.r;
+    }
+    rmse = std::sqrt(ss / rows.size());
+    const Eigen::Matrix<double, 6, 1> x = A.ldlt().solve(b);
+    if (!x.allFinite()) break;
+    Eigen::Isometry3d D = Eigen::Isometry3d::Identity();
+    const double angle = x.head<3>().norm();
+    if (angle > 1e-12) D.linear() = Eigen::AngleAxisd(angle, x.head<3>() / angle).toRotationMatrix();
+    D.translation() = x.tail<3>();
+    X = D * X;
+    dmax = std::max(dmin, std::min(dmax, 4 * sigma + cfg.icp_spacing));
+    const bool small = angle < 1e-6 && x.tail<3>().norm() < 1e-7;
+    if (exact) {
+      if (++exact_done >= exact_iterations || small) break;
+    } else if (small) {
+      exact_done = 1;  // converged on the field: polish with exact neighbours
+    }
+  }
+  Refined r;
+  r.T = X.inverse().cast<float>();
+  r.rmse = rmse;
+  return r;
+}
+
+/// Share of the coarse scene points within r of the model under T.
+double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, double r) {
+  if (s.coarse.size() == 0) return 0;
+  const Eigen::Isometry3f Ti = T.inverse();
+  const float r2 = static_cast<float>(r * r);
+  size_t n = 0;
+  for (const auto& p : s.coarse.points) {
+    const Vec3 q = Ti * p;
+    const int j = m.field.lookup(q);
+    if (j >= 0 && (q - m.fine->points[j]).squaredNorm() <= r2) ++n;
+  }
+  return static_cast<double>(n) / s.coarse.size();
+}
+
+/// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
+/// itself) that have a scene point within r_F.
+double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
+                      const MatchingConfig& cfg) {
+  const Eigen::Isometry3f Ti = T.inverse();
+  const Vec3 eye = Ti * cfg.viewpoint;
+  const float cos_max = std::cos(static_cast<float>(cfg.max_view_angle));
+  const float r2 = static_cast<float>(cfg.fitness_radius * cfg.fitness_radius);
+  std::vector<int> idx(1);
+  std::vector<float> d2(1);
+  size_t visible = 0, matched = 0;
+  const auto& mp = m.coarse->points;
+  const auto& mn = m.coarse->normals;
+  for (size_t i = 0; i < mp.size(); ++i) {
+    if (cfg.check_visibility) {
+      const Vec3 ray = mp[i] - eye;
+      const float dist = ray.norm();
+      if (dist <= 0) continue;
+      const Vec3 dir = ray / dist;
+      if (-mn[i].dot(dir) < cos_max) continue;
+      if (m.caster.occluded(eye, dir, 0.f, dist - static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel)))) continue;
+    }
+    ++visible;
+    const Vec3 p = T * mp[i];
+    if (s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2) ++matched;
+  }
+  return visible ? static_cast<double>(matched) / visible : 0.0;
+}
+
+Detection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                    uint64_t seed) {
+  Detection d;
+  d.model = m.id;
+  d.matcher = cfg.coarse;
+  std::vector<Hypothesis> candidates;
+  if (cfg.coarse == "ppf") {
+    candidates = ppfHypotheses(s, m, cfg, &d.iterations);
+  } else if (cfg.coarse == "fgr") {
+    std::vector<Vec3> sp, mp;
+    std::vector<Fpfh> sf, mf;
+    for (int i : s.fpfh_valid) {
+      sp.push_back(s.coarse.points[i]);
+      sf.push_back(s.fpfh[i]);
+    }
+    for (int i : m.fpfh_valid) {
+      mp.push_back(m.coarse->points[i]);
+      mf.push_back(m.fpfh[i]);
+    }
+    FgrOptions o;
+    o.max_correspondence_distance = cfg.inlier_distance;
+    o.seed = static_cast<int>(seed % 1000003);
+    Hypothesis h;
+    h.T = fastGlobalRegistration(mp, mf, sp, sf, o).cast<float>();
+    candidates.push_back(h);
+    d.iterations = o.iterations;
+  } else {
+    candidates = ransac(s, m, correspondences(s, m, cfg), cfg, seed, &d.iterations);
+  }
+  double best = -1;
+  for (const auto& h : candidates) {
+    const Refined r = icp(s, m, h.T, cfg);
+    Detection c = d;
+    c.pose = r.T.cast<double>();
+    c.rmse = r.rmse;
+    c.coverage = coverage(s, m, r.T, cfg.fitness_radius);
+    c.fitness = visibleFitness(s, m, r.T, cfg);
+    c.score = c.fitness * (cfg.min_coverage > 0 ? c.coverage : 1.0);
+    if (c.score > best) {
+      best = c.score;
+      d = c;
+    }
+  }
+  return d;
+}
+
+bool accepted(const Detection& d, const MatchingConfig& cfg) {
+  return d.score > 0 && d.fitness >= cfg.min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse;
+}
+
+Eigen::Matrix3d rotationAbout(const Eigen::Vector3d& axis, double angle) {
+  return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+}
+
+double rotationAngle(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle(); }
+
+}  // namespace
+
+PoseError poseError(const ModelInfo& info, const Eigen::Vector3d& centroid, const Eigen::Isometry3d& est,
+                    const Eigen::Isometry3d& truth) {
+  PoseError e;
+  e.translation = (est * centroid - truth * centroid).norm();
+  const Eigen::Vector3d a = info.symmetry.axis.normalized();
+  switch (info.symmetry.type) {
+    case Symmetry::Type::kNone:
+      e.rotation = rotationAngle(est.linear().transpose() * truth.linear());
+      break;
+    case Symmetry::Type::kDiscrete: {
+      e.rotation = M_PI;
+      for (int k = 0; k < info.symmetry.order; ++k) {
+        const Eigen::Matrix3d Rk = est.linear() * rotationAbout(a, 2 * M_PI * k / info.symmetry.order);
+        e.rotation = std::min(e.rotation, rotationAngle(Rk.transpose() * truth.linear()));
+      }
+      break;
+    }
+    case Symmetry::Type::kAxial:
+      e.rotation = std::acos(std::clamp((est.linear() * a).dot(truth.linear() * a), -1.0, 1.0));
+      break;
+    case Symmetry::Type::kSpherical:
+      e.rotation = 0;
+      break;
+  }
+  return e;
+}
+
+Eigen::Isometry3d canonicalPose(const ModelInfo& info, const Eigen::Vector3d& centroid, const Eigen::Isometry3d& pose) {
+  Eigen::Isometry3d out = pose;
+  const Eigen::Vector3d a = info.symmetry.axis.normalized();
+  // how far the model's x axis, turned about the axis, is from the scene's +x
+  auto xCost = [&](const Eigen::Matrix3d& R) { return -(R * Eigen::Vector3d::UnitX()).x(); };
+  switch (info.symmetry.type) {
+    case Symmetry::Type::kNone:
+      break;
+    case Symmetry::Type::kDiscrete: {
+      double best = 1e9;
+      for (int k = 0; k < info.symmetry.order; ++k) {
+        const Eigen::Matrix3d R = pose.linear() * rotationAbout(a, 2 * M_PI * k / info.symmetry.order);
+        if (xCost(R) < best - 1e-9) {
+          best = xCost(R);
+          out.linear() = R;
+        }
+      }
+      break;
+    }
+    case Symmetry::Type::kAxial: {
+      // maximise (R Rot(a,θ) x)·X = cosθ·u + sinθ·v with u = (R x)·X, v = (R (a × x))·X
+      Eigen::Vector3d x = Eigen::Vector3d::UnitX();
+      if (std::abs(a.dot(x)) > 0.9) x = Eigen::Vector3d::UnitY();
+      x = (x - a * a.dot(x)).normalized();
+      const Eigen::Vector3d y = a.cross(x);
+      const double u = (pose.linear() * x).x(), v = (pose.linear() * y).x();
+      const double theta = std::atan2(v, u);
+      out.linear() = pose.linear() * rotationAbout(a, theta);
+      break;
+    }
+    case Symmetry::Type::kSpherical:
+      out.linear().setIdentity();
+      out.translation() = pose * centroid - centroid;
+      break;
+  }
+  return out;
+}
+
+ModelMatcher::ModelMatcher(std::shared_ptr<const ModelLibrary> library, const MatchingConfig& config)
+    : library_(std::move(library)), config_(config) {
+  if (!library_) throw std::invalid_argument("ModelMatcher: no model library");
+  if (config_.coarse != "ppf" && config_.coarse != "ransac" && config_.coarse != "fgr") {
+    throw std::invalid_argument("ModelMatcher: coarse must be 'ppf', 'ransac' or 'fgr' (got '" + config_.coarse + "')");
+  }
+  if (config_.threads <= 0) config_.threads = std::max(1u, std::thread::hardware_concurrency());
+}
+
+ModelMatcher::~ModelMatcher() = default;
+
+std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::string& id) const {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = indices_.find(id);
+    if (it != indices_.end()) return it->second;
+  }
+  const ModelEntry& e = library_->model(id);
+  auto m = std::make_shared<ModelIndex>();
+  m->id = id;
+  m->info = e.info;
+  m->fine = library_->cloud(id, config_.icp_spacing);
+  {
+    // Descriptors see the model as a scan sees it: PCA normals over normal_radius (not the
+    // mesh's sharp face normals), turned outwards; computed on the coarse cloud like the scene's.
+    auto coarse = std::make_shared<ScanCloud>(*library_->cloud(id, config_.voxel));
+    auto pts = toXyz(coarse->points);
+    pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+    ne.setInputCloud(pts);
+    ne.setSearchSurface(toXyz(m->fine->points));
+    ne.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+    ne.setRadiusSearch(config_.normal_radius);
+    pcl::PointCloud<pcl::Normal> normals;
+    ne.compute(normals);
+    for (size_t i = 0; i < coarse->size(); ++i) {
+      Vec3 n = normals[i].getNormalVector3fMap();
+      if (!n.allFinite() || n.norm() < 0.5f) continue;
+      n.normalize();
+      coarse->normals[i] = n.dot(coarse->normals[i]) < 0 ? -n : n;
+    }
+    m->coarse = coarse;
+  }
+  if (config_.coarse == "ppf") {
+    m->ppf_cloud = thinned(*m->coarse, config_.ppf_sampling);
+    m->ppf = buildPpf(m->ppf_cloud, static_cast<float>(config_.ppf_distance_step), config_.ppf_angle_bins);
+  } else {
+    m->fpfh = computeFpfh(*m->coarse, config_.feature_radius);
+    std::vector<Fpfh> valid;
+    for (size_t i = 0; i < m->fpfh.size(); ++i) {
+      if (!validFpfh(m->fpfh[i])) continue;
+      m->fpfh_valid.push_back(static_cast<int>(i));
+      valid.push_back(m->fpfh[i]);
+    }
+    if (!valid.empty()) m->fpfh_tree.setInputCloud(toPclFpfh(valid));
+  }
+  m->fine_tree.setInputCloud(toXyz(m->fine->points));
+  for (const auto& p : m->fine->points) m->centroid += p.cast<double>();
+  if (!m->fine->points.empty()) m->centroid /= static_cast<double>(m->fine->size());
+  m->diameter = e.bounds.diagonal().norm();
+  // distance field: cells of ≈ 1/3 of the coarse inlier distance (at most 4 M cells); each
+  // fine point claims the cells within the margin whose centre it is nearest to
+  const float margin = static_cast<float>(std::max(2 * config_.inlier_distance, 6 * config_.icp_spacing));
+  const Eigen::Vector3f lo = e.bounds.min() - Vec3::Constant(margin), hi = e.bounds.max() + Vec3::Constant(margin);
+  const Eigen::Vector3f size = hi - lo;
+  float cell = static_cast<float>(std::max(config_.icp_spacing, config_.inlier_distance / 3));
+  cell = std::max(cell, std::cbrt(size.prod() / 4e6f));
+  m->field.origin = lo;
+  m->field.cell = cell;
+  m->field.dims = (size / cell).array().ceil().cast<int>().max(1);
+  const Eigen::Vector3i D = m->field.dims;
+  m->field.nearest.assign(static_cast<size_t>(D.x()) * D.y() * D.z(), -1);
+  std::vector<float> best(m->field.nearest.size(), margin * margin);
+  const int r = static_cast<int>(std::ceil(margin / cell));
+  for (size_t j = 0; j < m->fine->size(); ++j) {
+    const Vec3& p = m->fine->points[j];
+    const Eigen::Vector3i c = ((p - lo) / cell).array().floor().cast<int>();
+    for (int z = std::max(0, c.z() - r); z <= std::min(D.z() - 1, c.z() + r); ++z) {
+      for (int y = std::max(0, c.y() - r); y <= std::min(D.y() - 1, c.y() + r); ++y) {
+        for (int x = std::max(0, c.x() - r); x <= std::min(D.x() - 1, c.x() + r); ++x) {
+          const size_t k = (static_cast<size_t>(z) * D.y() + y) * D.x() + x;
+          const float d2 = (lo + cell * Vec3(x + 0.5f, y + 0.5f, z + 0.5f) - p).squaredNorm();
+          if (d2 < best[k]) {
+            best[k] = d2;
+            m->field.nearest[k] = static_cast<int32_t>(j);
+          }
+        }
+      }
+    }
+  }
+  m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
+  m->caster.commit();
+  std::lock_guard<std::mutex> lock(mutex_);
+  return indices_.emplace(id, m).first->second;
+}
+
+void ModelMatcher::prepare(const std::vector<std::string>& models_in) const {
+  const std::vector<std::string> models = models_in.empty() ? library_->ids() : models_in;
+  for (const auto& id : models) library_->model(id);
+  for (const auto& id : models) index(id);
+}
+
+Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return index(model)->centroid; }
+
+std::vector<Detection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
+                                            const std::vector<std::string>& models_in, MatchStats* stats) const {
+  const auto t0 = Clock::now();
+  MatchStats local;
+  MatchStats& st = stats ? *stats : local;
+  st = MatchStats();
+  std::vector<std::string> models = models_in.empty() ? library_->ids() : models_in;
+  for (const auto& id : models) library_->model(id);  // unknown id: throws before any work
+  std::vector<std::shared_ptr<const ModelIndex>> idx(models.size());
+  parallelFor(models.size(), config_.threads, [&](size_t i) { idx[i] = index(models[i]); });
+
+  struct Work {
+    int cluster;
+    std::vector<Vec3> points;
+    std::unique_ptr<SceneData> scene;
+    std::vector<Detection> per_model;
+  };
+  std::vector<Detection> out;
+  std::vector<Work> round;
+  for (size_t c = 0; c < clusters.size(); ++c) {
+    Work w;
+    w.cluster = static_cast<int>(c);
+    for (const auto& p : clusters[c].points) {
+      if (p.allFinite()) w.points.push_back(p);
+    }
+    if (w.points.size() < 3) {
+      st.warnings.push_back("cluster " + std::to_string(c) + ": " + std::to_string(w.points.size()) +
+                            " finite points, nothing to match");
+      continue;
+    }
+    round.push_back(std::move(w));
+  }
+  for (int instance = 0; instance < std::max(1, config_.max_instances) && !round.empty(); ++instance) {
+    parallelFor(round.size(), config_.threads, [&](size_t i) { round[i].scene = prepareScene(round[i].points, config_); });
+    std::vector<std::pair<size_t, size_t>> pairs;
+    for (size_t w = 0; w < round.size(); ++w) {
+      round[w].per_model.assign(models.size(), Detection());
+      for (size_t m = 0; m < models.size(); ++m) {
+        const bool too_big = config_.min_coverage > 0 &&
+                             round[w].scene->diameter > 1.15f * idx[m]->diameter + 2 * static_cast<float>(config_.voxel);
+        if (too_big) {
+          ++st.pairs_skipped_by_size;
+          continue;
+        }
+        pairs.emplace_back(w, m);
+      }
+    }
+    st.pairs += pairs.size();
+    parallelFor(pairs.size(), config_.threads, [&](size_t k) {
+      const auto [w, m] = pairs[k];
+      if (round[w].scene->coarse.size() < 3) return;
+      const uint64_t seed = config_.seed + 7919 * static_cast<uint64_t>(round[w].cluster) + 104729 * m + 15485863ull * instance;
+      round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], config_, seed);
+      round[w].per_model[m].cluster = round[w].cluster;
+    });
+    std::vector<Work> next;
+    for (auto& w : round) {
+      const Detection* best = nullptr;
+      size_t best_m = 0;
+      for (size_t m = 0; m < models.size(); ++m) {
+        const Detection& d = w.per_model[m];
+        if (!d.model.empty() && !accepted(d, config_)) st.rejected.push_back(d);
+        if (accepted(d, config_) && (!best || d.score > best->score)) {
+          best = &d;
+          best_m = m;
+        }
+      }
+      if (!best) continue;
+      Detection d = *best;
+      // leftover points (another part touching this one) get another search
+      const ModelIndex& mi = *idx[best_m];
+      const Eigen::Isometry3f Ti = d.pose.cast<float>().inverse();
+      const float r2 = static_cast<float>(4 * config_.fitness_radius * config_.fitness_radius);
+      Work rest;
+      rest.cluster = w.cluster;
+      for (const auto& p : w.points) {
+        const Vec3 q = Ti * p;
+        const int j = mi.field.lookup(q);
+        if (j < 0 || (q - mi.fine->points[j]).squaredNorm() > r2) rest.points.push_back(p);
+      }
+      d.pose = canonicalPose(mi.info, mi.centroid, d.pose);
+      out.push_back(d);
+      if (config_.min_coverage > 0 && static_cast<int>(rest.points.size()) >= config_.min_instance_points) {
+        next.push_back(std::move(rest));
+      }
+    }
+    round = std::move(next);
+  }
+  st.seconds = seconds(t0);
+  return out;
+}
+
+MatchingConfig loadMatchingConfig(const std::string& path) {
+  YamlMap m(loadYamlFile(path), path);
+  MatchingConfig c;
+  auto positive = [&](const char* key, double& v) {
+    v = m.getDouble(key, v);
+    if (!(v > 0)) m.fail(key, "must be > 0");
+  };
+  auto share = [&](const char* key, double& v) {
+    v = m.getDouble(key, v);
+    if (!(v >= 0 && v <= 1)) m.fail(key, "must be in [0, 1]");
+  };
+  positive("voxel", c.voxel);
+  positive("normal_radius", c.normal_radius);
+  positive("feature_radius", c.feature_radius);
+  c.mutual_filter = m.getBool("mutual_filter", c.mutual_filter);
+  c.min_correspondences = m.getInt("min_correspondences", c.min_correspondences);
+  c.coarse = m.getString("coarse", c.coarse);
+  if (c.coarse != "ppf" && c.coarse != "ransac" && c.coarse != "fgr") m.fail("coarse", "must be ppf, ransac or fgr");
+  positive("ppf_sampling", c.ppf_sampling);
+  positive("ppf_distance_step", c.ppf_distance_step);
+  c.ppf_angle_bins = m.getInt("ppf_angle_bins", c.ppf_angle_bins);
+  if (c.ppf_angle_bins < 4) m.fail("ppf_angle_bins", "must be >= 4");
+  c.ppf_ref_step = m.getInt("ppf_ref_step", c.ppf_ref_step);
+  if (c.ppf_ref_step < 1) m.fail("ppf_ref_step", "must be >= 1");
+  c.ppf_candidates = m.getInt("ppf_candidates", c.ppf_candidates);
+  if (c.ppf_candidates < 1) m.fail("ppf_candidates", "must be >= 1");
+  c.max_iterations = m.getInt("max_iterations", c.max_iterations);
+  if (c.max_iterations < 1) m.fail("max_iterations", "must be >= 1");
+  c.confidence = m.getDouble("confidence", c.confidence);
+  if (!(c.confidence > 0 && c.confidence < 1)) m.fail("confidence", "must be in (0, 1)");
+  share("edge_similarity", c.edge_similarity);
+  positive("normal_tolerance", c.normal_tolerance);
+  positive("inlier_distance", c.inlier_distance);
+  c.refine_candidates = m.getInt("refine_candidates", c.refine_candidates);
+  if (c.refine_candidates < 1) m.fail("refine_candidates", "must be >= 1");
+  positive("icp_spacing", c.icp_spacing);
+  c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
+  positive("icp_max_points", c.icp_max_points);
+  positive("fitness_radius", c.fitness_radius);
+  share("min_fitness", c.min_fitness);
+  share("min_coverage", c.min_coverage);
+  positive("max_rmse", c.max_rmse);
+  c.check_visibility = m.getBool("check_visibility", c.check_visibility);
+  if (m.has("viewpoint")) c.viewpoint = m.getVector3("viewpoint").cast<float>();
+  positive("max_view_angle", c.max_view_angle);
+  c.max_instances = m.getInt("max_instances", c.max_instances);
+  c.min_instance_points = m.getInt("min_instance_points", c.min_instance_points);
+  c.threads = m.getInt("threads", c.threads);
+  c.seed = static_cast<uint64_t>(m.getInt("seed", static_cast<int>(c.seed)));
+  m.finish();
+  return c;
+}
+
+}  // namespace cellsight

@@ -1,0 +1,130 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <random>
+
+#include "cellsight/errors.hpp"
+#include "cellsight/localization_eval.hpp"
+#include "cellsight/model_matching.hpp"
+#include "test_helpers.hpp"
+
+using namespace cellsight;
+using cellsight_test::errorOf;
+
+namespace {
+
+const std::string kModels = std::string(CELLSIGHT_SOURCE_DIR) + "/config/models";
+const Eigen::Vector3f kEye(0.52f, 0.f, 0.62f);  // the demo's scanner camera
+
+std::shared_ptr<const ModelLibrary> library() {
+  static auto lib = std::make_shared<const ModelLibrary>(kModels);
+  return lib;
+}
+
+MatchingConfig config() {
+  MatchingConfig c;
+  c.viewpoint = kEye;
+  return c;
+}
+
+Eigen::Isometry3d onTable(double x, double y, double yaw) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(x, y, 0);
+  T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  return T;
+}
+
+}  // namespace
+
+TEST(ModelMatching, FindsEachPartInItsSingleViewCloud) {
+  ModelMatcher m(library(), config());
+  int k = 0;
+  for (const std::string id : {"bracket", "housing", "blade", "holder"}) {
+    const Eigen::Isometry3d truth = onTable(0.45 + 0.03 * k, -0.05 + 0.04 * k, 0.4 + 1.3 * k);
+    ++k;
+    const ScanCloud view = singleViewCloud(library()->model(id).mesh, truth, kEye, 0.001, 2e-5, 7 + k);
+    MatchStats st;
+    const auto d = m.locate({view}, {}, &st);
+    ASSERT_EQ(d.size(), 1u) << id;
+    EXPECT_EQ(d[0].model, id);
+    const PoseError e = poseError(library()->model(id).info, m.centroid(id), d[0].pose, truth);
+    std::printf("%-8s %zu points: %.3f mm %.3f deg, fitness %.2f coverage %.2f rmse %.3f mm, %.3f s\n", id.c_str(),
+                view.size(), e.translation * 1e3, e.rotation * 180 / M_PI, d[0].fitness, d[0].coverage, d[0].rmse * 1e3,
+                st.seconds);
+    EXPECT_LT(e.translation, 0.5e-3) << id;
+    EXPECT_LT(e.rotation, 0.5 * M_PI / 180) << id;
+  }
+}
+
+TEST(ModelMatching, SymmetryAwareErrorsAndCanonicalPoses) {
+  ModelInfo info;
+  const Eigen::Vector3d c(0, 0, 0.01);
+  const Eigen::Isometry3d T = onTable(0.5, 0.1, 0.3);
+  const Eigen::Isometry3d half = T * onTable(0, 0, M_PI);
+  info.symmetry.type = Symmetry::Type::kNone;
+  EXPECT_NEAR(poseError(info, c, half, T).rotation, M_PI, 1e-9);
+  info.symmetry.type = Symmetry::Type::kDiscrete;
+  info.symmetry.order = 2;
+  EXPECT_NEAR(poseError(info, c, half, T).rotation, 0, 1e-9);
+  EXPECT_NEAR(poseError(info, c, T * onTable(0, 0, 0.5 * M_PI), T).rotation, 0.5 * M_PI, 1e-9);
+  // canonical poses of equivalent poses coincide
+  EXPECT_TRUE(canonicalPose(info, c, half).isApprox(canonicalPose(info, c, T), 1e-9));
+  info.symmetry.type = Symmetry::Type::kAxial;
+  EXPECT_NEAR(poseError(info, c, T * onTable(0, 0, 1.234), T).rotation, 0, 1e-9);
+  EXPECT_TRUE(canonicalPose(info, c, T * onTable(0, 0, 1.234)).isApprox(canonicalPose(info, c, T), 1e-9));
+  Eigen::Isometry3d tilted = T;
+  tilted.linear() = T.linear() * Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  EXPECT_NEAR(poseError(info, c, tilted, T).rotation, 0.1, 1e-9);
+  info.symmetry.type = Symmetry::Type::kSpherical;
+  EXPECT_EQ(poseError(info, c, tilted, T).rotation, 0);
+  const Eigen::Isometry3d s = canonicalPose(info, c, tilted);
+  EXPECT_TRUE(s.linear().isIdentity(1e-12));
+  EXPECT_TRUE((s * c).isApprox(tilted * c, 1e-12));  // the centre stays
+}
+
+TEST(ModelMatching, OcclusionAndOutliersKeepThePart) {
+  ModelMatcher m(library(), config());
+  const Eigen::Isometry3d truth = onTable(0.5, 0.02, 0.7);
+  const ScanCloud view = singleViewCloud(library()->model("bracket").mesh, truth, kEye, 0.001, 2e-5, 3);
+  std::mt19937_64 rng(5);
+  const ScanCloud occluded = randomWalkOcclusion(view, 0.4, 20, rng);
+  EXPECT_NEAR(static_cast<double>(occluded.size()) / view.size(), 0.6, 0.01);
+  Eigen::AlignedBox3f box;
+  for (const auto& p : view.points) box.extend(p);
+  const ScanCloud noisy = addUniformOutliers(view, box, 1.0, rng);
+  EXPECT_EQ(noisy.size(), 2 * view.size());
+  MatchingConfig whole = config();
+  whole.min_coverage = 0;  // outliers are not part of the cluster to explain
+  ModelMatcher mw(library(), whole);
+  for (const ScanCloud* c : {&occluded, &noisy}) {
+    MatchStats st;
+    const auto d = (c == &noisy ? mw : m).locate({*c}, {"bracket", "housing"}, &st);
+    ASSERT_GE(d.size(), 1u) << (c == &noisy ? "outliers" : "occlusion");
+    EXPECT_EQ(d[0].model, "bracket");
+    const PoseError e = poseError(library()->model("bracket").info, m.centroid("bracket"), d[0].pose, truth);
+    EXPECT_LT(e.translation, 1e-3);
+    EXPECT_LT(e.rotation, 1 * M_PI / 180);
+  }
+}
+
+TEST(ModelMatching, BadInputGivesClearStatus) {
+  ModelMatcher m(library(), config());
+  ScanCloud empty, nan;
+  for (int i = 0; i < 100; ++i) nan.append(Eigen::Vector3f::Constant(NAN), 0.f);
+  MatchStats st;
+  EXPECT_TRUE(m.locate({empty, nan}, {"bracket"}, &st).empty());
+  ASSERT_EQ(st.warnings.size(), 2u);
+  EXPECT_NE(st.warnings[1].find("0 finite points"), std::string::npos) << st.warnings[1];
+  EXPECT_NE(errorOf([&] { m.locate({empty}, {"no_such_part"}); }).find("unknown model 'no_such_part'"), std::string::npos);
+  MatchingConfig bad = config();
+  bad.coarse = "magic";
+  EXPECT_THROW(ModelMatcher(library(), bad), std::invalid_argument);
+  // the shipped settings load; a typo names file and key
+  EXPECT_EQ(loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml").coarse, "ppf");
+  const std::string path = ::testing::TempDir() + "/matching_typo.yaml";
+  std::ofstream(path) << "voxel: 0.002\nfitnes_radius: 0.002\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("fitnes_radius"), std::string::npos);
+  std::ofstream(path) << "min_fitness: 1.5\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("min_fitness"), std::string::npos);
+}
