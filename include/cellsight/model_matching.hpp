@@ -53,7 +53,7 @@ struct MatchingConfig {
   uint64_t seed = 42;
 };
 
-struct Detection {
+struct PartDetection {
   std::string model;
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< T_scene_model (canonical)
   double fitness = 0;    ///< share of visible model points within r_F of the scene
@@ -68,7 +68,7 @@ struct Detection {
 struct MatchStats {
   double seconds = 0;
   size_t pairs = 0, pairs_skipped_by_size = 0;
-  std::vector<Detection> rejected;  ///< best pose per (cluster, model) that failed validation
+  std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
 };
 
@@ -96,8 +96,9 @@ class ModelMatcher {
   /// Finds instances of `models` (empty: all) in each cluster; clusters × models run in
   /// parallel. Throws std::out_of_range for an unknown model id (before any work). Empty or
   /// all-NaN clusters give a warning and no detection.
-  std::vector<Detection> locate(const std::vector<ScanCloud>& clusters, const std::vector<std::string>& models,
-                                MatchStats* stats = nullptr) const;
+  /// `viewpoint` (scene frame) overrides config().viewpoint for this call.
+  std::vector<PartDetection> locate(const std::vector<ScanCloud>& clusters, const std::vector<std::string>& models,
+                                MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr) const;
 
   /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
   /// first locate(); unknown ids throw std::out_of_range.

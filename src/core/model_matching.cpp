@@ -630,9 +630,9 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   return visible ? static_cast<double>(matched) / visible : 0.0;
 }
 
-Detection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                     uint64_t seed) {
-  Detection d;
+  PartDetection d;
   d.model = m.id;
   d.matcher = cfg.coarse;
   std::vector<Hypothesis> candidates;
@@ -662,7 +662,7 @@ Detection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const
   double best = -1;
   for (const auto& h : candidates) {
     const Refined r = icp(s, m, h.T, cfg);
-    Detection c = d;
+    PartDetection c = d;
     c.pose = r.T.cast<double>();
     c.rmse = r.rmse;
     c.coverage = coverage(s, m, r.T, cfg.fitness_radius);
@@ -676,7 +676,7 @@ Detection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const
   return d;
 }
 
-bool accepted(const Detection& d, const MatchingConfig& cfg) {
+bool accepted(const PartDetection& d, const MatchingConfig& cfg) {
   return d.score > 0 && d.fitness >= cfg.min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse;
 }
 
@@ -856,24 +856,27 @@ void ModelMatcher::prepare(const std::vector<std::string>& models_in) const {
 
 Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return index(model)->centroid; }
 
-std::vector<Detection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
-                                            const std::vector<std::string>& models_in, MatchStats* stats) const {
+std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
+                                            const std::vector<std::string>& models_in, MatchStats* stats,
+                                            const Eigen::Vector3f* viewpoint) const {
   const auto t0 = Clock::now();
+  MatchingConfig cfg = config_;
+  if (viewpoint) cfg.viewpoint = *viewpoint;
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
   st = MatchStats();
   std::vector<std::string> models = models_in.empty() ? library_->ids() : models_in;
   for (const auto& id : models) library_->model(id);  // unknown id: throws before any work
   std::vector<std::shared_ptr<const ModelIndex>> idx(models.size());
-  parallelFor(models.size(), config_.threads, [&](size_t i) { idx[i] = index(models[i]); });
+  parallelFor(models.size(), cfg.threads, [&](size_t i) { idx[i] = index(models[i]); });
 
   struct Work {
     int cluster;
     std::vector<Vec3> points;
     std::unique_ptr<SceneData> scene;
-    std::vector<Detection> per_model;
+    std::vector<PartDetection> per_model;
   };
-  std::vector<Detection> out;
+  std::vector<PartDetection> out;
   std::vector<Work> round;
   for (size_t c = 0; c < clusters.size(); ++c) {
     Work w;
@@ -888,14 +891,14 @@ std::vector<Detection> ModelMatcher::locate(const std::vector<ScanCloud>& cluste
     }
     round.push_back(std::move(w));
   }
-  for (int instance = 0; instance < std::max(1, config_.max_instances) && !round.empty(); ++instance) {
-    parallelFor(round.size(), config_.threads, [&](size_t i) { round[i].scene = prepareScene(round[i].points, config_); });
+  for (int instance = 0; instance < std::max(1, cfg.max_instances) && !round.empty(); ++instance) {
+    parallelFor(round.size(), cfg.threads, [&](size_t i) { round[i].scene = prepareScene(round[i].points, cfg); });
     std::vector<std::pair<size_t, size_t>> pairs;
     for (size_t w = 0; w < round.size(); ++w) {
-      round[w].per_model.assign(models.size(), Detection());
+      round[w].per_model.assign(models.size(), PartDetection());
       for (size_t m = 0; m < models.size(); ++m) {
-        const bool too_big = config_.min_coverage > 0 &&
-                             round[w].scene->diameter > 1.15f * idx[m]->diameter + 2 * static_cast<float>(config_.voxel);
+        const bool too_big = cfg.min_coverage > 0 &&
+                             round[w].scene->diameter > 1.15f * idx[m]->diameter + 2 * static_cast<float>(cfg.voxel);
         if (too_big) {
           ++st.pairs_skipped_by_size;
           continue;
@@ -904,31 +907,31 @@ std::vector<Detection> ModelMatcher::locate(const std::vector<ScanCloud>& cluste
       }
     }
     st.pairs += pairs.size();
-    parallelFor(pairs.size(), config_.threads, [&](size_t k) {
+    parallelFor(pairs.size(), cfg.threads, [&](size_t k) {
       const auto [w, m] = pairs[k];
       if (round[w].scene->coarse.size() < 3) return;
-      const uint64_t seed = config_.seed + 7919 * static_cast<uint64_t>(round[w].cluster) + 104729 * m + 15485863ull * instance;
-      round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], config_, seed);
+      const uint64_t seed = cfg.seed + 7919 * static_cast<uint64_t>(round[w].cluster) + 104729 * m + 15485863ull * instance;
+      round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], cfg, seed);
       round[w].per_model[m].cluster = round[w].cluster;
     });
     std::vector<Work> next;
     for (auto& w : round) {
-      const Detection* best = nullptr;
+      const PartDetection* best = nullptr;
       size_t best_m = 0;
       for (size_t m = 0; m < models.size(); ++m) {
-        const Detection& d = w.per_model[m];
-        if (!d.model.empty() && !accepted(d, config_)) st.rejected.push_back(d);
-        if (accepted(d, config_) && (!best || d.score > best->score)) {
+        const PartDetection& d = w.per_model[m];
+        if (!d.model.empty() && !accepted(d, cfg)) st.rejected.push_back(d);
+        if (accepted(d, cfg) && (!best || d.score > best->score)) {
           best = &d;
           best_m = m;
         }
       }
       if (!best) continue;
-      Detection d = *best;
+      PartDetection d = *best;
       // leftover points (another part touching this one) get another search
       const ModelIndex& mi = *idx[best_m];
       const Eigen::Isometry3f Ti = d.pose.cast<float>().inverse();
-      const float r2 = static_cast<float>(4 * config_.fitness_radius * config_.fitness_radius);
+      const float r2 = static_cast<float>(4 * cfg.fitness_radius * cfg.fitness_radius);
       Work rest;
       rest.cluster = w.cluster;
       for (const auto& p : w.points) {
@@ -938,7 +941,7 @@ std::vector<Detection> ModelMatcher::locate(const std::vector<ScanCloud>& cluste
       }
       d.pose = canonicalPose(mi.info, mi.centroid, d.pose);
       out.push_back(d);
-      if (config_.min_coverage > 0 && static_cast<int>(rest.points.size()) >= config_.min_instance_points) {
+      if (cfg.min_coverage > 0 && static_cast<int>(rest.points.size()) >= cfg.min_instance_points) {
         next.push_back(std::move(rest));
       }
     }

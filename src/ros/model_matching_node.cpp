@@ -1,0 +1,222 @@
+// model_matching: clusters (cellsight/ClusterArray) → detections (cellsight/DetectionArray, one
+// message per scan), tf frames object/<n> at the scan's stamp, mesh markers for rviz, and the
+// ~locate_objects service (cellsight/LocateObjects) on the latest clusters. The viewpoint of the
+// visible-surface check is the scanner camera, looked up in tf at the clusters' stamp; without
+// that transform the clusters are dropped with the reason (never an identity).
+#include <geometry_msgs/TransformStamped.h>
+#include <ros/ros.h>
+#include <tf2_eigen/tf2_eigen.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <mutex>
+#include <nlohmann/json.hpp>
+
+#include "cellsight/ClusterArray.h"
+#include "cellsight/DetectionArray.h"
+#include "cellsight/LocateObjects.h"
+#include "cellsight/file_io.hpp"
+#include "cellsight/model_matching.hpp"
+#include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/node.hpp"
+#include "cellsight_ros/params.hpp"
+
+namespace {
+
+class ModelMatching {
+ public:
+  ModelMatching(ros::NodeHandle& nh, ros::NodeHandle& pnh) : listener_(buffer_) {
+    const std::string settings = cellsight_ros::requireParam<std::string>(
+        pnh, "settings_file", "matching settings YAML, e.g. $(find cellsight)/config/matching.yaml");
+    const std::string models = cellsight_ros::requireParam<std::string>(
+        pnh, "models_dir", "model library folder, e.g. $(find cellsight)/config/models");
+    cellsight_ros::param(pnh, "camera_frame", camera_frame_);
+    cellsight_ros::param(pnh, "output_file", output_file_);
+    cellsight_ros::param(pnh, "tf_timeout", tf_timeout_);
+    library_ = std::make_shared<const cellsight::ModelLibrary>(models);
+    for (const auto& id : library_->ids()) {
+      for (const auto& w : library_->model(id).warnings) ROS_WARN("model_matching: model '%s': %s", id.c_str(), w.c_str());
+    }
+    config_ = cellsight::loadMatchingConfig(settings);
+    // the viewpoint comes per scan from tf; build the per-model data now, not on the first scan
+    matcher_ = std::make_unique<cellsight::ModelMatcher>(library_, config_);
+    const ros::WallTime t0 = ros::WallTime::now();
+    matcher_->prepare({});
+    ROS_INFO("model_matching: %zu models ready in %.2f s (coarse stage: %s)", library_->ids().size(),
+             (ros::WallTime::now() - t0).toSec(), config_.coarse.c_str());
+    detections_pub_ = nh.advertise<cellsight::DetectionArray>("detections", 1, true);
+    markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("detections/markers", 1, true);
+    clusters_sub_ = nh.subscribe("clusters", 1, &ModelMatching::onClusters, this);
+    service_ = pnh.advertiseService("locate_objects", &ModelMatching::onLocate, this);
+  }
+
+ private:
+  void onClusters(const cellsight::ClusterArrayConstPtr& msg) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      latest_ = msg;
+    }
+    cellsight::DetectionArray out;
+    std::string why;
+    if (!locate(*msg, {}, &out, &why)) {
+      ROS_ERROR("model_matching: clusters at %.3f dropped: %s", msg->header.stamp.toSec(), why.c_str());
+      return;
+    }
+    publish(out);
+  }
+
+  bool onLocate(cellsight::LocateObjects::Request& req, cellsight::LocateObjects::Response& res) {
+    cellsight::ClusterArrayConstPtr clusters;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      clusters = latest_;
+    }
+    if (!clusters) {
+      res.success = false;
+      res.message = "no clusters received yet on " + clusters_sub_.getTopic() + ": scan first";
+      return true;
+    }
+    for (const auto& id : req.models) {
+      if (!library_->has(id)) {
+        res.success = false;
+        std::string known;
+        for (const auto& k : library_->ids()) known += " " + k;
+        res.message = "unknown model '" + id + "' (known:" + known + ")";
+        return true;
+      }
+    }
+    std::string why;
+    res.success = locate(*clusters, req.models, &res.detections, &why);
+    res.message = res.success ? std::to_string(res.detections.detections.size()) + " detections" : why;
+    if (res.success) publish(res.detections);
+    return true;
+  }
+
+  bool locate(const cellsight::ClusterArray& msg, const std::vector<std::string>& models, cellsight::DetectionArray* out,
+              std::string* why) {
+    Eigen::Isometry3d T_frame_camera;
+    try {
+      T_frame_camera = tf2::transformToEigen(
+          buffer_.lookupTransform(msg.header.frame_id, camera_frame_, msg.header.stamp, ros::Duration(tf_timeout_)));
+    } catch (const tf2::TransformException& e) {
+      *why = "no transform " + msg.header.frame_id + " <- " + camera_frame_ + " at the scan's stamp (" + e.what() +
+             "); is the calibration published?";
+      return false;
+    }
+    std::vector<cellsight::ScanCloud> clusters;
+    for (const auto& c : msg.clouds) {
+      try {
+        clusters.push_back(cellsight_ros::fromCloudMsg(c));
+      } catch (const std::exception& e) {
+        out->warnings.push_back(std::string("a cluster cloud was unreadable: ") + e.what());
+        clusters.emplace_back();
+      }
+    }
+    const Eigen::Vector3f eye = T_frame_camera.translation().cast<float>();
+    cellsight::MatchStats stats;
+    const auto dets = matcher_->locate(clusters, models, &stats, &eye);
+    out->header = msg.header;
+    out->clusters = static_cast<uint32_t>(clusters.size());
+    out->locate_seconds = stats.seconds;
+    for (const auto& w : stats.warnings) out->warnings.push_back(w);
+    int n = 0;
+    for (const cellsight::PartDetection& d : dets) {
+      cellsight::Detection m;
+      m.model = d.model;
+      m.name = "object/" + std::to_string(n++);
+      m.pose = tf2::toMsg(d.pose);
+      m.fitness = d.fitness;
+      m.coverage = d.coverage;
+      m.rmse = d.rmse;
+      m.matcher = d.matcher;
+      m.cluster = d.cluster;
+      out->detections.push_back(m);
+    }
+    return true;
+  }
+
+  void publish(const cellsight::DetectionArray& out) {
+    detections_pub_.publish(out);
+    visualization_msgs::MarkerArray markers;
+    visualization_msgs::Marker clear;
+    clear.action = visualization_msgs::Marker::DELETEALL;
+    markers.markers.push_back(clear);
+    int id = 0;
+    nlohmann::json j;
+    j["frame_id"] = out.header.frame_id;
+    j["stamp"] = out.header.stamp.toSec();
+    j["clusters"] = out.clusters;
+    j["locate_seconds"] = out.locate_seconds;
+    j["warnings"] = out.warnings;
+    j["detections"] = nlohmann::json::array();
+    for (const auto& d : out.detections) {
+      geometry_msgs::TransformStamped t;
+      t.header = out.header;
+      t.child_frame_id = d.name;
+      t.transform.translation.x = d.pose.position.x;
+      t.transform.translation.y = d.pose.position.y;
+      t.transform.translation.z = d.pose.position.z;
+      t.transform.rotation = d.pose.orientation;
+      broadcaster_.sendTransform(t);
+      visualization_msgs::Marker m;
+      m.header = out.header;
+      m.ns = "detections";
+      m.id = id++;
+      m.type = visualization_msgs::Marker::MESH_RESOURCE;
+      m.mesh_resource = "file://" + library_->model(d.model).info.mesh_file;
+      m.pose = d.pose;
+      m.scale.x = m.scale.y = m.scale.z = 1.0;
+      m.color.r = 0.2f;
+      m.color.g = 0.5f;
+      m.color.b = 1.0f;
+      m.color.a = 0.8f;
+      markers.markers.push_back(m);
+      const auto& q = d.pose.orientation;
+      j["detections"].push_back({{"model", d.model},
+                                 {"name", d.name},
+                                 {"xyz", {d.pose.position.x, d.pose.position.y, d.pose.position.z}},
+                                 {"quat", {q.x, q.y, q.z, q.w}},
+                                 {"fitness", d.fitness},
+                                 {"coverage", d.coverage},
+                                 {"rmse", d.rmse},
+                                 {"matcher", d.matcher},
+                                 {"cluster", d.cluster}});
+      ROS_INFO("model_matching: %s = %s at (%.4f, %.4f, %.4f), fitness %.2f, coverage %.2f, rmse %.3f mm", d.name.c_str(),
+               d.model.c_str(), d.pose.position.x, d.pose.position.y, d.pose.position.z, d.fitness, d.coverage,
+               d.rmse * 1e3);
+    }
+    markers_pub_.publish(markers);
+    for (const auto& w : out.warnings) ROS_WARN("model_matching: %s", w.c_str());
+    ROS_INFO("model_matching: %zu parts located in %u clusters in %.3f s", out.detections.size(), out.clusters,
+             out.locate_seconds);
+    if (!output_file_.empty()) {
+      try {
+        cellsight::writeFileAtomic(output_file_, j.dump(2) + "\n");
+      } catch (const std::exception& e) {
+        ROS_ERROR("model_matching: cannot write %s: %s", output_file_.c_str(), e.what());
+      }
+    }
+  }
+
+  std::shared_ptr<const cellsight::ModelLibrary> library_;
+  cellsight::MatchingConfig config_;
+  std::unique_ptr<cellsight::ModelMatcher> matcher_;
+  std::string camera_frame_ = "scanner_camera_optical";
+  std::string output_file_;
+  double tf_timeout_ = 0.5;
+  tf2_ros::Buffer buffer_;
+  tf2_ros::TransformListener listener_;
+  tf2_ros::TransformBroadcaster broadcaster_;
+  ros::Publisher detections_pub_, markers_pub_;
+  ros::Subscriber clusters_sub_;
+  ros::ServiceServer service_;
+  std::mutex mutex_;
+  cellsight::ClusterArrayConstPtr latest_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return cellsight_ros::runNode<ModelMatching>(argc, argv, "model_matching");
+}
