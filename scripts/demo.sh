@@ -52,6 +52,16 @@ while [ ! -f "$OUT/scan_result.json" ]; do
   sleep 0.5
 done
 t4=$(now)
+# model_matching writes detections_raw.json once the scan's clusters are matched.
+deadline=$(( $(date +%s) + 180 ))
+while [ ! -f "$OUT/detections_raw.json" ]; do
+  if [ "$(date +%s)" -gt "$deadline" ] || grep -q "model_matching.*has died" "$OUT/launch.log"; then
+    echo "demo: FAILED: no detections 180 s after the scan; see $OUT/launch.log" >&2
+    grep -E "model_matching|clustering" "$OUT/launch.log" | tail -5 >&2 || true
+    exit 1
+  fi
+  sleep 0.5
+done
 sleep 3  # let rviz draw the last frame
 screenshot "$OUT/rviz.png"
 kill -INT "$LAUNCH_PID"
@@ -65,6 +75,9 @@ fi
 # Scanner figures: the demo scan against the simulator's truth (+ K = 5 sphere sweeps, MPE_AL).
 "$CELLSIGHT_BUILD/devel/lib/cellsight/cellsight_scanner_accuracy" scan --scene config/scenes/demo.yaml \
   --cloud "$OUT/scan.ply" --k 5 --json "$OUT/scanner_eval.json" >/dev/null
+# Localisation figures: the detections against the simulator's truth.
+"$CELLSIGHT_BUILD/devel/lib/cellsight/cellsight_evaluate_localization" demo --scene config/scenes/demo.yaml \
+  --detections "$OUT/detections_raw.json" --json "$OUT/detections.json" || true
 t6=$(now)
 
 /usr/bin/python3 - "$OUT" "$t0" "$t1" "$t2" "$t3" "$t4" "$t5" "$t6" <<'PY'
@@ -109,7 +122,7 @@ sd = subprocess.run(["/usr/bin/convert", os.path.join(out, "rviz.png"), "-colors
                      "-format", "%[fx:standard_deviation]", "info:"],
                     capture_output=True, text=True).stdout.strip()
 report = {
-    "what_ran": ["cell_sim", "calibration_publisher", "laser_plane_tracker", "triangulation", "clustering",
+    "what_ran": ["cell_sim", "calibration_publisher", "laser_plane_tracker", "triangulation", "clustering", "model_matching",
                  "camera_trigger (Scan action)", "scan_client", "rosbag record", "rviz (Xvfb)",
                  "cellsight_scanner_accuracy scan"],
     "scene": "config/scenes/demo.yaml",
@@ -135,8 +148,12 @@ clusters = re.findall(r"clustering: (\d+) points -> (\d+) clusters", open(os.pat
 if clusters:
     report["clustering"] = {"input_points": int(clusters[-1][0]), "clusters": int(clusters[-1][1]),
                             "objects_in_scene": len(json.load(open(os.path.join(out, "truth", "scene_truth.json")))["objects"])}
+det_path = os.path.join(out, "detections.json")
+if os.path.exists(det_path):
+    det = json.load(open(det_path))
+    report["localization"] = {k: det[k] for k in ("tp", "fp", "fn", "median_t_err_mm", "median_r_err_deg", "locate_seconds")}
 write_json("report.json", report)
-print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds", "clustering") if k in report}, indent=1))
+print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds", "clustering", "localization") if k in report}, indent=1))
 print(json.dumps({k: v for k, v in scanner.items() if k not in ("notes", "sphere_in_scan")}, indent=1))
 missing = [t for t in ("/scanner_camera/image_raw", "/scanner_camera/camera_info", "/tf", "/tf_static") if t not in topics]
 if len(frames["frames"]) != frames["poses"] or missing:

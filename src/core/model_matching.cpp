@@ -661,7 +661,9 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   }
   double best = -1;
   for (const auto& h : candidates) {
+    if (!h.T.matrix().allFinite()) continue;
     const Refined r = icp(s, m, h.T, cfg);
+    if (!r.T.matrix().allFinite()) continue;
     PartDetection c = d;
     c.pose = r.T.cast<double>();
     c.rmse = r.rmse;

@@ -1,5 +1,7 @@
 #include "cellsight/raycaster.hpp"
 
+#include <cmath>
+
 #include <embree3/rtcore.h>
 
 #include <stdexcept>
@@ -73,6 +75,7 @@ void RayCaster::commit() {
 
 RayHit RayCaster::intersect(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float t_near,
                             float t_far) const {
+  if (!o.allFinite() || !d.allFinite() || !(t_far > t_near) || std::isnan(t_near)) return RayHit();
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRayHit rh;
@@ -102,6 +105,8 @@ RayHit RayCaster::intersect(const Eigen::Vector3f& o, const Eigen::Vector3f& d, 
 
 bool RayCaster::occluded(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float t_near,
                          float t_far) const {
+  // Embree asserts on invalid rays: a non-finite ray or an empty interval hits nothing
+  if (!o.allFinite() || !d.allFinite() || !(t_far > t_near) || std::isnan(t_near)) return false;
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRay ray;
