@@ -653,8 +653,12 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
     o.max_correspondence_distance = cfg.inlier_distance;
     o.seed = static_cast<int>(seed % 1000003);
     Hypothesis h;
-    h.T = fastGlobalRegistration(mp, mf, sp, sf, o).cast<float>();
-    candidates.push_back(h);
+    try {
+      h.T = fastGlobalRegistration(mp, mf, sp, sf, o).cast<float>();
+      candidates.push_back(h);
+    } catch (const std::exception&) {
+      // Open3D throws when too few matches survive its tuple test: no hypothesis
+    }
     d.iterations = o.iterations;
   } else {
     candidates = ransac(s, m, correspondences(s, m, cfg), cfg, seed, &d.iterations);

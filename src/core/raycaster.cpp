@@ -73,9 +73,19 @@ void RayCaster::commit() {
   impl_->committed = true;
 }
 
+namespace {
+// Embree asserts on invalid rays (coordinates beyond ±1.8e18, NaN, negative t_near): such a
+// ray, or an empty interval, hits nothing.
+bool validRay(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float t_near, float t_far) {
+  const float big = 1e12f;
+  return o.allFinite() && d.allFinite() && o.cwiseAbs().maxCoeff() < big && d.cwiseAbs().maxCoeff() < big &&
+         t_near >= 0.f && t_far > t_near;
+}
+}  // namespace
+
 RayHit RayCaster::intersect(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float t_near,
                             float t_far) const {
-  if (!o.allFinite() || !d.allFinite() || !(t_far > t_near) || std::isnan(t_near)) return RayHit();
+  if (!validRay(o, d, t_near, t_far)) return RayHit();
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRayHit rh;
@@ -105,8 +115,7 @@ RayHit RayCaster::intersect(const Eigen::Vector3f& o, const Eigen::Vector3f& d, 
 
 bool RayCaster::occluded(const Eigen::Vector3f& o, const Eigen::Vector3f& d, float t_near,
                          float t_far) const {
-  // Embree asserts on invalid rays: a non-finite ray or an empty interval hits nothing
-  if (!o.allFinite() || !d.allFinite() || !(t_far > t_near) || std::isnan(t_near)) return false;
+  if (!validRay(o, d, t_near, t_far)) return false;
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRay ray;

@@ -115,15 +115,27 @@ struct Trial {
 };
 
 Trial runTrial(const ModelMatcher& m, const ModelLibrary& lib, const std::string& id, const ScanCloud& cloud,
-               const Eigen::Isometry3d& truth, double max_t, double max_r) {
+               const Eigen::Isometry3d& truth, double max_t, double max_r, bool all_models) {
   Trial t;
   MatchStats st;
-  const auto dets = m.locate({cloud}, {}, &st);
+  const auto dets = m.locate({cloud}, all_models ? std::vector<std::string>{} : std::vector<std::string>{id}, &st);
   t.seconds = st.seconds;
   for (const auto& d : dets) {
     if (d.model != id) continue;
     const PoseError e = poseError(lib.model(id).info, m.centroid(id), d.pose, truth);
     if (e.translation <= max_t && e.rotation <= max_r) t.success = true;
+  }
+  if (!t.success && std::getenv("CELLSIGHT_EVAL_VERBOSE")) {
+    for (const auto& d : dets) {
+      const PoseError e = poseError(lib.model(d.model).info, m.centroid(d.model), d.pose, truth);
+      std::fprintf(stderr, "  miss %s: found %s at %.1f mm %.1f deg (fitness %.2f coverage %.2f)\n", id.c_str(), d.model.c_str(),
+                   e.translation * 1e3, e.rotation / kDeg, d.fitness, d.coverage);
+    }
+    for (const auto& d : st.rejected) {
+      const PoseError e = d.model == id ? poseError(lib.model(id).info, m.centroid(id), d.pose, truth) : PoseError{-1, -1};
+      std::fprintf(stderr, "  rejected %s: %.1f mm %.1f deg fitness %.2f coverage %.2f rmse %.3f mm\n", d.model.c_str(),
+                   e.translation * 1e3, e.rotation / kDeg, d.fitness, d.coverage, d.rmse * 1e3);
+    }
   }
   return t;
 }
@@ -137,9 +149,11 @@ int runOcclusion(const Args& a) {
   std::vector<double> levels;
   for (double l = std::stod(a.get("from", "0.25")); l <= std::stod(a.get("to", "0.75")) + 1e-9; l += std::stod(a.get("step", "0.05")))
     levels.push_back(l);
+  const bool all_models = a.get("search", "all") == "all";
   ModelMatcher m(s.lib, s.cfg);
   m.prepare({});
   json j;
+  j["models_searched"] = all_models ? "all (identify and locate)" : "the part's own model (locate only)";
   j["test"] = "random-walk occlusion (thesis ch. 5): single-view clouds of each part at random table poses";
   j["trials_per_level"] = trials;
   j["k_s"] = k_s;
@@ -156,7 +170,7 @@ int runOcclusion(const Args& a) {
         const Eigen::Isometry3d truth = randomTablePose(s.workspace, rng);
         const ScanCloud view = singleViewCloud(s.lib->model(id).mesh, truth, s.eye, 0.001, 2e-5, rng());
         const ScanCloud occ = randomWalkOcclusion(view, levels[li], k_s, rng);
-        const Trial r = runTrial(m, *s.lib, id, occ, truth, max_t, max_r);
+        const Trial r = runTrial(m, *s.lib, id, occ, truth, max_t, max_r, all_models);
         ok += r.success;
         secs.push_back(r.seconds);
       }
@@ -185,9 +199,11 @@ int runOutliers(const Args& a) {
   for (const auto& r : split(a.get("ratios", "0,0.25,0.5,1,1.5,2"))) ratios.push_back(std::stod(r));
   MatchingConfig cfg = s.cfg;
   cfg.min_coverage = 0;  // the outliers are part of the cloud: nothing can explain them
+  const bool all_models = a.get("search", "all") == "all";
   ModelMatcher m(s.lib, cfg);
   m.prepare({});
   json j;
+  j["models_searched"] = all_models ? "all (identify and locate)" : "the part's own model (locate only)";
   j["test"] = "uniform outliers with random normals in the scanner's workspace box, ratio of the part's points";
   j["ratios"] = ratios;
   j["trials_per_ratio"] = trials;
@@ -202,7 +218,7 @@ int runOutliers(const Args& a) {
         const Eigen::Isometry3d truth = randomTablePose(s.workspace, rng);
         const ScanCloud view = singleViewCloud(s.lib->model(id).mesh, truth, s.eye, 0.001, 2e-5, rng());
         const ScanCloud noisy = addUniformOutliers(view, s.workspace, ratios[ri], rng);
-        const Trial r = runTrial(m, *s.lib, id, noisy, truth, max_t, max_r);
+        const Trial r = runTrial(m, *s.lib, id, noisy, truth, max_t, max_r, all_models);
         ok += r.success;
         secs.push_back(r.seconds);
       }
@@ -311,7 +327,7 @@ int main(int argc, char** argv) {
       "       cellsight_evaluate_localization occlusion [--parts blade,housing,holder] [--trials 100] [--from 0.25]\n"
       "           [--to 0.75] [--step 0.05] [--ks 20] [--json occ.json] [--png occ.png]\n"
       "       cellsight_evaluate_localization outliers [--parts ...] [--trials 50] [--ratios 0,0.5,1,2] [--json] [--png]\n"
-      "   common: [--root repo] [--models folder] [--matching matching.yaml] [--max-t-mm 2] [--max-r-deg 2]\n";
+      "   common: [--search all|self] [--root repo] [--models folder] [--matching matching.yaml] [--max-t-mm 2] [--max-r-deg 2]\n";
   if (argc < 2) {
     std::cerr << usage;
     return 2;
