@@ -42,7 +42,7 @@ namespace {
 
 const std::string kRoot = CELLSIGHT_SOURCE_DIR;
 const Eigen::Vector3f kEye(0.52f, 0.f, 0.62f);
-const unsigned kMethodLimitSeconds = 600;
+const unsigned kMethodLimitSeconds = 300;
 const double kVoxel = 0.002, kNormal = 0.005, kFeature = 0.01, kInlier = 0.003;
 
 struct Case {

@@ -12,6 +12,7 @@
 #include "cellsight/calibration.hpp"
 #include "cellsight/camera_model.hpp"
 #include "cellsight/clustering.hpp"
+#include "cellsight/model_matching.hpp"
 #include "cellsight/scanner_config.hpp"
 #include "cellsight/scene.hpp"
 #include "cellsight/trajectory.hpp"
@@ -59,6 +60,10 @@ std::string validateFile(const std::string& f) {
   if (node.IsMap() && node["cluster_tolerance"]) {
     cellsight::loadClusteringConfig(f);
     return "clustering settings";
+  }
+  if (node.IsMap() && (node["ppf_sampling"] || node["fitness_radius"] || node["coarse"])) {
+    cellsight::loadMatchingConfig(f);
+    return "matching settings";
   }
   if (node.IsMap() && (node["line"] || node["triangulation"] || node["outlier_k"])) {
     cellsight::loadScannerSettings(f);
