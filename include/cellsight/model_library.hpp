@@ -25,7 +25,9 @@ std::vector<Fpfh> computeFpfh(const ScanCloud& cloud_with_normals, double radius
 
 struct ModelEntry {
   ModelInfo info;
-  TriangleMesh mesh;
+  TriangleMesh mesh;         ///< empty for a model given as a point cloud
+  ScanCloud source_cloud;    ///< the reference cloud of a cloud model (thesis: "CAD mesh or reference cloud")
+  Eigen::Vector3f sensor = Eigen::Vector3f::Zero();  ///< where the reference cloud was seen from
   Eigen::AlignedBox3f bounds;
   std::vector<std::string> warnings;  ///< e.g. degenerate (flat) geometry
 };
@@ -35,6 +37,13 @@ class ModelLibrary {
   /// Loads every `<folder>/<id>/model.yaml`; a missing or corrupt model throws ConfigError
   /// naming the file. A flat or tiny model is kept with a warning.
   explicit ModelLibrary(const std::string& folder);
+  /// An empty library, filled with addCloudModel().
+  ModelLibrary() = default;
+
+  /// Adds a model given as a reference point cloud (e.g. an earlier scan of the part), seen from
+  /// `sensor` (model frame; orients the normals). Throws std::invalid_argument for fewer than
+  /// 10 finite points or an id already present.
+  void addCloudModel(const std::string& id, const ScanCloud& cloud, const Eigen::Vector3f& sensor);
 
   std::vector<std::string> ids() const;
   bool has(const std::string& id) const { return models_.count(id) > 0; }

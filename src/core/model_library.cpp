@@ -117,6 +117,24 @@ ModelLibrary::ModelLibrary(const std::string& folder) {
   }
 }
 
+void ModelLibrary::addCloudModel(const std::string& id, const ScanCloud& cloud, const Eigen::Vector3f& sensor) {
+  if (models_.count(id)) throw std::invalid_argument("addCloudModel: model '" + id + "' exists already");
+  ModelEntry m;
+  m.info.id = id;
+  for (const auto& p : cloud.points) {
+    if (!p.allFinite()) continue;
+    m.source_cloud.append(p, 0.f);
+    m.bounds.extend(p);
+  }
+  if (m.source_cloud.size() < 10) {
+    throw std::invalid_argument("addCloudModel: model '" + id + "' has " + std::to_string(m.source_cloud.size()) +
+                                " finite points (at least 10 needed)");
+  }
+  m.source_cloud.frame_id = "model";
+  m.sensor = sensor;
+  models_.emplace(id, std::move(m));
+}
+
 std::vector<std::string> ModelLibrary::ids() const {
   std::vector<std::string> out;
   for (const auto& kv : models_) out.push_back(kv.first);
@@ -141,7 +159,25 @@ std::shared_ptr<const ScanCloud> ModelLibrary::cloud(const std::string& id, doub
     auto it = clouds_.find(key);
     if (it != clouds_.end()) return it->second;
   }
-  auto c = std::make_shared<const ScanCloud>(sampleMesh(m.mesh, resolution));
+  std::shared_ptr<const ScanCloud> c;
+  if (m.mesh.faces.empty()) {
+    // a cloud model: voxel centroids at the resolution, normals from neighbours toward the sensor
+    pcl::PointCloud<pcl::PointXYZ>::Ptr in(new pcl::PointCloud<pcl::PointXYZ>);
+    for (const auto& p : m.source_cloud.points) in->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+    pcl::VoxelGrid<pcl::PointXYZ> vg;
+    vg.setInputCloud(in);
+    const float leaf = static_cast<float>(resolution);
+    vg.setLeafSize(leaf, leaf, leaf);
+    pcl::PointCloud<pcl::PointXYZ> thin;
+    vg.filter(thin);
+    ScanCloud out;
+    out.frame_id = "model";
+    for (const auto& q : thin) out.append(q.getVector3fMap(), 0.f);
+    estimateNormals(out, 12, m.sensor);
+    c = std::make_shared<const ScanCloud>(std::move(out));
+  } else {
+    c = std::make_shared<const ScanCloud>(sampleMesh(m.mesh, resolution));
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   return clouds_.emplace(key, c).first->second;
 }

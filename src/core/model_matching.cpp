@@ -203,6 +203,7 @@ struct ModelMatcher::ModelIndex {
   ScanCloud ppf_cloud;  // coarse cloud thinned to ppf_sampling
   PpfTable ppf;         // its point pair features (Drost et al. 2010)
   RayCaster caster;  // the mesh in the model frame (self-occlusion)
+  bool has_mesh = true;  // false for a cloud model: visibility from the normals only
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   float diameter = 0;
 };
@@ -621,7 +622,7 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
       if (dist <= 0) continue;
       const Vec3 dir = ray / dist;
       if (-mn[i].dot(dir) < cos_max) continue;
-      if (m.caster.occluded(eye, dir, 0.f, dist - static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel)))) continue;
+      if (m.has_mesh && m.caster.occluded(eye, dir, 0.f, dist - static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel)))) continue;
     }
     ++visible;
     const Vec3 p = T * mp[i];
@@ -848,7 +849,8 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
       }
     }
   }
-  m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
+  m->has_mesh = !e.mesh.faces.empty();
+  if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
   m->caster.commit();
   std::lock_guard<std::mutex> lock(mutex_);
   return indices_.emplace(id, m).first->second;

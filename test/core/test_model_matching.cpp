@@ -128,3 +128,72 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
   std::ofstream(path) << "min_fitness: 1.5\n";
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("min_fitness"), std::string::npos);
 }
+
+// Real data (../shared/data/pointclouds): a reference scan as the model (thesis: "CAD mesh or
+// reference cloud"), whole-scene search (no cluster to cover).
+TEST(ModelMatchingRealData, Bunny045OntoBunny000) {
+  const std::string dir = std::string(CELLSIGHT_SOURCE_DIR) + "/../shared/data/pointclouds/stanford_bunny";
+  std::ifstream tf(dir + "/T_bun045_to_bun000.txt");
+  if (!tf) GTEST_SKIP() << "real data not found at " << dir << " (../shared/data)";
+  Eigen::Matrix4d M;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) tf >> M(r, c);
+  Eigen::Isometry3d truth(M);
+  auto lib = std::make_shared<ModelLibrary>();
+  const Eigen::Vector3f sensor(0, 0, 1);  // the range scanner looked down -z in scan coordinates
+  lib->addCloudModel("bun045", loadCloud(dir + "/bun045.ply"), sensor);
+  const ScanCloud scene = loadCloud(dir + "/bun000.ply");
+  MatchingConfig cfg;
+  cfg.viewpoint = sensor;
+  cfg.voxel = 0.003;
+  cfg.normal_radius = 0.006;
+  cfg.ppf_sampling = 0.005;
+  cfg.ppf_distance_step = 0.005;
+  cfg.inlier_distance = 0.004;
+  cfg.fitness_radius = 0.002;
+  cfg.min_coverage = 0;  // bun000 holds surface bun045 never saw
+  cfg.min_fitness = 0.3;
+  cfg.max_rmse = 0.002;
+  cfg.max_instances = 1;
+  ModelMatcher m(lib, cfg);
+  MatchStats st;
+  const auto d = m.locate({scene}, {}, &st);
+  ASSERT_EQ(d.size(), 1u);
+  const PoseError e = poseError(lib->model("bun045").info, m.centroid("bun045"), d[0].pose, truth);
+  std::printf("bun045 -> bun000: %.3f mm %.3f deg, fitness %.2f, rmse %.3f mm, %.2f s (%zu + %zu points)\n",
+              e.translation * 1e3, e.rotation * 180 / M_PI, d[0].fitness, d[0].rmse * 1e3, st.seconds,
+              lib->model("bun045").source_cloud.size(), scene.size());
+  EXPECT_LT(e.translation, 2e-3);
+  EXPECT_LT(e.rotation, 1 * M_PI / 180);
+}
+
+TEST(ModelMatchingRealData, PclMilkCartonInItsKinectScene) {
+  const std::string dir = std::string(CELLSIGHT_SOURCE_DIR) + "/../shared/data/pointclouds/pcl";
+  if (!std::ifstream(dir + "/milk.pcd")) GTEST_SKIP() << "real data not found at " << dir << " (../shared/data)";
+  auto lib = std::make_shared<ModelLibrary>();
+  const Eigen::Vector3f kinect = Eigen::Vector3f::Zero();  // the model was cut out of this scene: same frame
+  lib->addCloudModel("milk", loadCloud(dir + "/milk.pcd"), kinect);
+  const ScanCloud scene = loadCloud(dir + "/milk_cartoon_all_small_clorox.pcd");
+  MatchingConfig cfg;
+  cfg.viewpoint = kinect;
+  cfg.voxel = 0.005;
+  cfg.normal_radius = 0.012;
+  cfg.ppf_sampling = 0.01;
+  cfg.ppf_distance_step = 0.008;
+  cfg.inlier_distance = 0.008;
+  cfg.icp_spacing = 0.002;
+  cfg.fitness_radius = 0.005;
+  cfg.min_coverage = 0;  // a whole Kinect scene, not a cluster
+  cfg.min_fitness = 0.3;
+  cfg.max_rmse = 0.005;
+  cfg.max_instances = 1;
+  ModelMatcher m(lib, cfg);
+  MatchStats st;
+  const auto d = m.locate({scene}, {}, &st);
+  ASSERT_EQ(d.size(), 1u);
+  const PoseError e = poseError(lib->model("milk").info, m.centroid("milk"), d[0].pose, Eigen::Isometry3d::Identity());
+  std::printf("milk in milk_cartoon_all_small_clorox: %.3f mm %.3f deg, fitness %.2f, rmse %.3f mm, %.2f s (%zu points)\n",
+              e.translation * 1e3, e.rotation * 180 / M_PI, d[0].fitness, d[0].rmse * 1e3, st.seconds, scene.size());
+  EXPECT_LT(e.translation, 5e-3);
+  EXPECT_LT(e.rotation, 2 * M_PI / 180);
+}
