@@ -1,0 +1,114 @@
+// The model_matching node: the service refuses before any clusters and for an unknown model
+// (and keeps answering); a cluster holding a single view of a part gives a detection, its tf
+// frame and a correct pose; clusters in a frame with no transform are dropped, the node lives on.
+#include <gtest/gtest.h>
+#include <ros/package.h>
+#include <ros/ros.h>
+#include <tf2_eigen/tf2_eigen.h>
+#include <tf2_ros/static_transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
+
+#include "cellsight/ClusterArray.h"
+#include "cellsight/DetectionArray.h"
+#include "cellsight/LocateObjects.h"
+#include "cellsight/localization_eval.hpp"
+#include "cellsight/model_matching.hpp"
+#include "cellsight_ros/conversions.hpp"
+
+namespace {
+
+cellsight::DetectionArrayConstPtr waitForDetections(const ros::Time& stamp, double seconds) {
+  cellsight::DetectionArrayConstPtr got;
+  ros::NodeHandle nh;
+  auto sub = nh.subscribe<cellsight::DetectionArray>("detections", 1, [&](const cellsight::DetectionArrayConstPtr& m) {
+    if (m->header.stamp == stamp) got = m;
+  });
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
+  while (!got && ros::WallTime::now() < end) {
+    ros::spinOnce();
+    ros::WallDuration(0.05).sleep();
+  }
+  return got;
+}
+
+}  // namespace
+
+TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
+  ros::NodeHandle nh;
+  tf2_ros::Buffer buffer;
+  tf2_ros::TransformListener listener(buffer);  // before the detections: object/<n> is not latched
+  auto locate = nh.serviceClient<cellsight::LocateObjects>("model_matching/locate_objects");
+  ASSERT_TRUE(locate.waitForExistence(ros::Duration(90)));
+  cellsight::LocateObjects srv;
+  ASSERT_TRUE(locate.call(srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.message.find("no clusters"), std::string::npos) << srv.response.message;
+
+  // the scanner camera of the demo cell, as calibration_publisher would send it
+  tf2_ros::StaticTransformBroadcaster static_tf;
+  Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();
+  T_base_camera.translation() = Eigen::Vector3d(0.52, 0, 0.62);
+  T_base_camera.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  geometry_msgs::TransformStamped cam = tf2::eigenToTransform(T_base_camera);
+  cam.header.frame_id = "base_link";
+  cam.header.stamp = ros::Time::now();
+  cam.child_frame_id = "scanner_camera_optical";
+  static_tf.sendTransform(cam);
+
+  const std::string models = ros::package::getPath("cellsight") + "/config/models";
+  const cellsight::ModelLibrary lib(models);
+  Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
+  truth.translation() = Eigen::Vector3d(0.47, 0.03, 0);
+  truth.linear() = Eigen::AngleAxisd(0.9, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const cellsight::ScanCloud view =
+      cellsight::singleViewCloud(lib.model("bracket").mesh, truth, Eigen::Vector3f(0.52f, 0.f, 0.62f), 0.001, 2e-5, 11);
+  cellsight::ClusterArray clusters;
+  clusters.header.frame_id = "base_link";
+  clusters.header.stamp = ros::Time::now();
+  clusters.clouds.push_back(cellsight_ros::toCloudMsg(view, clusters.header.stamp));
+  clusters.clouds.back().header.frame_id = "base_link";
+  cellsight::ScanCloud nan;
+  for (int i = 0; i < 20; ++i) nan.append(Eigen::Vector3f::Constant(NAN), 0.f);
+  clusters.clouds.push_back(cellsight_ros::toCloudMsg(nan, clusters.header.stamp));
+  auto pub = nh.advertise<cellsight::ClusterArray>("clusters", 1, true);
+  ros::WallDuration(1.0).sleep();
+  pub.publish(clusters);
+  const auto det = waitForDetections(clusters.header.stamp, 60);
+  ASSERT_TRUE(det) << "no detections for the published clusters";
+  ASSERT_EQ(det->detections.size(), 1u);
+  EXPECT_EQ(det->detections[0].model, "bracket");
+  Eigen::Isometry3d pose;
+  tf2::fromMsg(det->detections[0].pose, pose);
+  cellsight::ModelMatcher centroid(std::make_shared<const cellsight::ModelLibrary>(models), cellsight::MatchingConfig());
+  const auto e = cellsight::poseError(lib.model("bracket").info, centroid.centroid("bracket"), pose, truth);
+  EXPECT_LT(e.translation, 1e-3);
+  EXPECT_LT(e.rotation, 1 * M_PI / 180);
+  EXPECT_FALSE(det->warnings.empty());  // the all-NaN cluster is named
+
+  EXPECT_TRUE(buffer.canTransform("base_link", "object/0", clusters.header.stamp, ros::Duration(5)));
+
+  srv.request.models = {"no_such_part"};
+  ASSERT_TRUE(locate.call(srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.message.find("unknown model 'no_such_part'"), std::string::npos) << srv.response.message;
+  srv.request.models = {"bracket"};
+  ASSERT_TRUE(locate.call(srv));
+  EXPECT_TRUE(srv.response.success) << srv.response.message;
+  EXPECT_EQ(srv.response.detections.detections.size(), 1u);
+
+  // no transform for this frame: dropped (no detections for this stamp), the node keeps serving
+  clusters.header.frame_id = "nowhere";
+  clusters.header.stamp = ros::Time::now();
+  pub.publish(clusters);
+  EXPECT_FALSE(waitForDetections(clusters.header.stamp, 5));
+  srv.request.models = {};
+  ASSERT_TRUE(locate.call(srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.message.find("no transform"), std::string::npos) << srv.response.message;
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_model_matching_node");
+  return RUN_ALL_TESTS();
+}
