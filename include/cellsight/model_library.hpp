@@ -44,6 +44,9 @@ class ModelLibrary {
   /// `sensor` (model frame; orients the normals). Throws std::invalid_argument for fewer than
   /// 10 finite points or an id already present.
   void addCloudModel(const std::string& id, const ScanCloud& cloud, const Eigen::Vector3f& sensor);
+  /// Adds a model given as a mesh (model frame = mesh frame). Throws std::invalid_argument for
+  /// an empty mesh or an id already present.
+  void addMeshModel(const std::string& id, const TriangleMesh& mesh);
 
   std::vector<std::string> ids() const;
   bool has(const std::string& id) const { return models_.count(id) > 0; }

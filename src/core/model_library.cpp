@@ -135,6 +135,16 @@ void ModelLibrary::addCloudModel(const std::string& id, const ScanCloud& cloud, 
   models_.emplace(id, std::move(m));
 }
 
+void ModelLibrary::addMeshModel(const std::string& id, const TriangleMesh& mesh) {
+  if (models_.count(id)) throw std::invalid_argument("addMeshModel: model '" + id + "' exists already");
+  if (mesh.faces.empty()) throw std::invalid_argument("addMeshModel: model '" + id + "' has no faces");
+  ModelEntry m;
+  m.info.id = id;
+  m.mesh = mesh;
+  m.bounds = mesh.bounds();
+  models_.emplace(id, std::move(m));
+}
+
 std::vector<std::string> ModelLibrary::ids() const {
   std::vector<std::string> out;
   for (const auto& kv : models_) out.push_back(kv.first);

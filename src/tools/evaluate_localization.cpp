@@ -15,6 +15,8 @@
 
 #include "cellsight/file_io.hpp"
 #include "cellsight/localization_eval.hpp"
+#include "cellsight/mesh.hpp"
+#include "cellsight/scan_cloud.hpp"
 #include "cellsight/model_matching.hpp"
 #include "cellsight/scene.hpp"
 #include "cli_args.hpp"
@@ -319,6 +321,73 @@ int runDemo(const Args& a) {
   return counts.fn == 0 && counts.fp == 0 ? 0 : 3;
 }
 
+/// A mesh model located in a real scene without ground truth (e.g. UWA): fitness, RMSE and an
+/// overlay (scene grey, the placed model red, seen from the sensor).
+int runReal(const Args& a) {
+  const double scale = std::stod(a.get("scale", "1"));
+  const TriangleMesh mesh = loadMesh(a.get("model"), scale);
+  ScanCloud scene = loadCloud(a.get("scene"));
+  for (auto& p : scene.points) p *= static_cast<float>(scale);
+  auto lib = std::make_shared<ModelLibrary>();
+  lib->addMeshModel("model", mesh);
+  MatchingConfig cfg = loadMatchingConfig(a.get("matching"));
+  cfg.min_coverage = 0;  // a whole scene, not a cluster
+  cfg.max_instances = 1;
+  ModelMatcher m(lib, cfg);
+  const auto t0 = std::chrono::steady_clock::now();
+  m.prepare({});
+  MatchStats st;
+  const auto dets = m.locate({scene}, {}, &st);
+  const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  json j = {{"model", a.get("model")}, {"scene", a.get("scene")}, {"scene_points", scene.size()},
+            {"locate_seconds", st.seconds}, {"with_model_preparation_seconds", total}, {"found", !dets.empty()}};
+  for (const auto& w : st.warnings) j["warnings"].push_back(w);
+  if (!dets.empty()) {
+    const auto& d = dets[0];
+    const Eigen::Quaterniond q(d.pose.linear());
+    j["pose"] = {{"xyz", {d.pose.translation().x(), d.pose.translation().y(), d.pose.translation().z()}},
+                 {"quat", {q.x(), q.y(), q.z(), q.w()}}};
+    j["fitness"] = d.fitness;
+    j["rmse_mm"] = d.rmse * 1e3;
+    std::printf("%s: fitness %.3f, rmse %.3f mm, locate %.2f s (%zu scene points)\n", a.get("scene").c_str(), d.fitness,
+                d.rmse * 1e3, st.seconds, scene.size());
+  } else {
+    std::printf("%s: not found (locate %.2f s)\n", a.get("scene").c_str(), st.seconds);
+    for (const auto& r : st.rejected)
+      std::printf("  rejected: fitness %.3f rmse %.3f mm\n", r.fitness, r.rmse * 1e3);
+  }
+  writeJson(a.get("json"), j);
+  if (!a.get("png").empty()) {
+    // pinhole view from the sensor (origin, looking along -z as the UWA scans do; +z otherwise)
+    float zs = 0;
+    for (const auto& p : scene.points) zs += p.z();
+    const float dir = zs < 0 ? -1.f : 1.f;
+    Eigen::AlignedBox2f box;
+    auto proj = [&](const Eigen::Vector3f& p) { return Eigen::Vector2f(p.x() / (dir * p.z()), p.y() / (dir * p.z())); };
+    for (const auto& p : scene.points)
+      if (dir * p.z() > 0) box.extend(proj(p));
+    const int W = 900;
+    const float sx = (W - 20) / std::max(1e-6f, box.sizes().x());
+    const int H = static_cast<int>(box.sizes().y() * sx) + 20;
+    cv::Mat img(H, W, CV_8UC3, cv::Scalar(255, 255, 255));
+    auto pix = [&](const Eigen::Vector3f& p) {
+      const Eigen::Vector2f u = proj(p);
+      return cv::Point(10 + static_cast<int>((u.x() - box.min().x()) * sx), H - 10 - static_cast<int>((u.y() - box.min().y()) * sx));
+    };
+    for (const auto& p : scene.points)
+      if (dir * p.z() > 0) cv::circle(img, pix(p), 1, cv::Scalar(150, 150, 150), -1);
+    if (!dets.empty()) {
+      const ScanCloud placed = sampleMesh(mesh, std::max(0.002, cfg.voxel), 3);
+      const Eigen::Isometry3f T = dets[0].pose.cast<float>();
+      for (const auto& p : placed.points) cv::circle(img, pix(T * p), 1, cv::Scalar(30, 30, 220), -1);
+    }
+    std::vector<uchar> buf;
+    cv::imencode(".png", img, buf);
+    writeFileAtomic(a.get("png"), std::string(buf.begin(), buf.end()));
+  }
+  return dets.empty() ? 3 : 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -327,6 +396,8 @@ int main(int argc, char** argv) {
       "       cellsight_evaluate_localization occlusion [--parts blade,housing,holder] [--trials 100] [--from 0.25]\n"
       "           [--to 0.75] [--step 0.05] [--ks 20] [--json occ.json] [--png occ.png]\n"
       "       cellsight_evaluate_localization outliers [--parts ...] [--trials 50] [--ratios 0,0.5,1,2] [--json] [--png]\n"
+      "       cellsight_evaluate_localization real --model mesh.ply --scene scene.ply --matching M.yaml [--scale 0.001]\n"
+      "           [--json out.json] [--png overlay.png]\n"
       "   common: [--search all|self] [--root repo] [--models folder] [--matching matching.yaml] [--max-t-mm 2] [--max-r-deg 2]\n";
   if (argc < 2) {
     std::cerr << usage;
@@ -338,6 +409,7 @@ int main(int argc, char** argv) {
     if (mode == "demo") return runDemo(a);
     if (mode == "occlusion") return runOcclusion(a);
     if (mode == "outliers") return runOutliers(a);
+    if (mode == "real") return runReal(a);
     std::cerr << usage;
     return 2;
   } catch (const std::exception& e) {
