@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -142,102 +143,82 @@ Trial runTrial(const ModelMatcher& m, const ModelLibrary& lib, const std::string
   return t;
 }
 
-int runOcclusion(const Args& a) {
-  Setup s = setup(a);
-  const auto parts = split(a.get("parts", "blade,housing,holder"));
-  const int trials = std::stoi(a.get("trials", "100"));
-  const int k_s = std::stoi(a.get("ks", "20"));
+/// Degrades a single view by `x` (an occlusion share, an outlier ratio).
+using Degrade = std::function<ScanCloud(const ScanCloud& view, double x, std::mt19937_64& rng)>;
+
+/// For each part and each x: `--trials` single views at random table poses, degraded, located;
+/// success rates and median times into `j`, then the JSON and the plot.
+int sweep(const Args& a, const Setup& s, const MatchingConfig& cfg, const std::vector<std::string>& parts, int trials,
+          const std::string& what, const std::vector<double>& xs, uint64_t seed, const Degrade& degrade, json& j,
+          const std::string& title, const std::string& xlabel) {
   const double max_t = std::stod(a.get("max-t-mm", "2")) * 1e-3, max_r = std::stod(a.get("max-r-deg", "2")) * kDeg;
-  std::vector<double> levels;
-  for (double l = std::stod(a.get("from", "0.25")); l <= std::stod(a.get("to", "0.75")) + 1e-9; l += std::stod(a.get("step", "0.05")))
-    levels.push_back(l);
   const bool all_models = a.get("search", "all") == "all";
-  ModelMatcher m(s.lib, s.cfg);
+  ModelMatcher m(s.lib, cfg);
   m.prepare({});
-  json j;
   j["models_searched"] = all_models ? "all (identify and locate)" : "the part's own model (locate only)";
-  j["test"] = "random-walk occlusion (thesis ch. 5): single-view clouds of each part at random table poses";
-  j["trials_per_level"] = trials;
-  j["k_s"] = k_s;
   j["success"] = {{"max_t_mm", max_t * 1e3}, {"max_r_deg", max_r / kDeg}};
-  j["levels"] = levels;
   std::vector<std::pair<std::string, std::vector<double>>> series;
   for (const auto& id : parts) {
     std::vector<double> rates, times;
-    for (size_t li = 0; li < levels.size(); ++li) {
-      std::mt19937_64 rng(1000 * li + std::hash<std::string>()(id) % 1000);
+    for (size_t xi = 0; xi < xs.size(); ++xi) {
+      std::mt19937_64 rng(seed + 1000 * xi + std::hash<std::string>()(id) % 1000);
       int ok = 0;
       std::vector<double> secs;
       for (int t = 0; t < trials; ++t) {
         const Eigen::Isometry3d truth = randomTablePose(s.workspace, rng);
         const ScanCloud view = singleViewCloud(s.lib->model(id).mesh, truth, s.eye, 0.001, 2e-5, rng());
-        const ScanCloud occ = randomWalkOcclusion(view, levels[li], k_s, rng);
-        const Trial r = runTrial(m, *s.lib, id, occ, truth, max_t, max_r, all_models);
+        const Trial r = runTrial(m, *s.lib, id, degrade(view, xs[xi], rng), truth, max_t, max_r, all_models);
         ok += r.success;
         secs.push_back(r.seconds);
       }
       rates.push_back(100.0 * ok / trials);
       times.push_back(median(secs));
-      std::printf("%-8s occlusion %2.0f %%: success %5.1f %% (median %.3f s)\n", id.c_str(), levels[li] * 100, rates.back(),
-                  times.back());
+      std::printf("%-8s %s %3.0f %%: success %5.1f %% (median %.3f s)\n", id.c_str(), what.c_str(), xs[xi] * 100,
+                  rates.back(), times.back());
       std::fflush(stdout);
     }
     j["parts"][id] = {{"success_percent", rates}, {"median_seconds", times}};
     series.push_back({id, rates});
   }
   writeJson(a.get("json"), j);
-  std::vector<double> xs;
-  for (double l : levels) xs.push_back(l * 100);
-  plot(a.get("png"), "occlusion: success rate per part", "occlusion %", xs, series);
+  std::vector<double> percent;
+  for (double x : xs) percent.push_back(x * 100);
+  plot(a.get("png"), title, xlabel, percent, series);
   return 0;
 }
 
+int runOcclusion(const Args& a) {
+  const Setup s = setup(a);
+  const int trials = std::stoi(a.get("trials", "100"));
+  const int k_s = std::stoi(a.get("ks", "20"));
+  std::vector<double> levels;
+  for (double l = std::stod(a.get("from", "0.25")); l <= std::stod(a.get("to", "0.75")) + 1e-9; l += std::stod(a.get("step", "0.05")))
+    levels.push_back(l);
+  json j;
+  j["test"] = "random-walk occlusion (thesis ch. 5): single-view clouds of each part at random table poses";
+  j["trials_per_level"] = trials;
+  j["k_s"] = k_s;
+  j["levels"] = levels;
+  return sweep(a, s, s.cfg, split(a.get("parts", "blade,housing,holder")), trials, "occlusion", levels, 0,
+               [k_s](const ScanCloud& v, double x, std::mt19937_64& rng) { return randomWalkOcclusion(v, x, k_s, rng); }, j,
+               "occlusion: success rate per part", "occlusion %");
+}
+
 int runOutliers(const Args& a) {
-  Setup s = setup(a);
-  const auto parts = split(a.get("parts", "blade,housing,holder,bracket"));
+  const Setup s = setup(a);
   const int trials = std::stoi(a.get("trials", "50"));
-  const double max_t = std::stod(a.get("max-t-mm", "2")) * 1e-3, max_r = std::stod(a.get("max-r-deg", "2")) * kDeg;
   std::vector<double> ratios;
   for (const auto& r : split(a.get("ratios", "0,0.25,0.5,1,1.5,2"))) ratios.push_back(std::stod(r));
   MatchingConfig cfg = s.cfg;
   cfg.min_coverage = 0;  // the outliers are part of the cloud: nothing can explain them
-  const bool all_models = a.get("search", "all") == "all";
-  ModelMatcher m(s.lib, cfg);
-  m.prepare({});
   json j;
-  j["models_searched"] = all_models ? "all (identify and locate)" : "the part's own model (locate only)";
   j["test"] = "uniform outliers with random normals in the scanner's workspace box, ratio of the part's points";
   j["ratios"] = ratios;
   j["trials_per_ratio"] = trials;
-  std::vector<std::pair<std::string, std::vector<double>>> series;
-  for (const auto& id : parts) {
-    std::vector<double> rates, times;
-    for (size_t ri = 0; ri < ratios.size(); ++ri) {
-      std::mt19937_64 rng(77 + 1000 * ri + std::hash<std::string>()(id) % 1000);
-      int ok = 0;
-      std::vector<double> secs;
-      for (int t = 0; t < trials; ++t) {
-        const Eigen::Isometry3d truth = randomTablePose(s.workspace, rng);
-        const ScanCloud view = singleViewCloud(s.lib->model(id).mesh, truth, s.eye, 0.001, 2e-5, rng());
-        const ScanCloud noisy = addUniformOutliers(view, s.workspace, ratios[ri], rng);
-        const Trial r = runTrial(m, *s.lib, id, noisy, truth, max_t, max_r, all_models);
-        ok += r.success;
-        secs.push_back(r.seconds);
-      }
-      rates.push_back(100.0 * ok / trials);
-      times.push_back(median(secs));
-      std::printf("%-8s outliers %3.0f %%: success %5.1f %% (median %.3f s)\n", id.c_str(), ratios[ri] * 100, rates.back(),
-                  times.back());
-      std::fflush(stdout);
-    }
-    j["parts"][id] = {{"success_percent", rates}, {"median_seconds", times}};
-    series.push_back({id, rates});
-  }
-  writeJson(a.get("json"), j);
-  std::vector<double> xs;
-  for (double r : ratios) xs.push_back(r * 100);
-  plot(a.get("png"), "outliers: success rate per part", "outliers, % of the part's points", xs, series);
-  return 0;
+  const Eigen::AlignedBox3f box = s.workspace;
+  return sweep(a, s, cfg, split(a.get("parts", "blade,housing,holder,bracket")), trials, "outliers", ratios, 77,
+               [box](const ScanCloud& v, double x, std::mt19937_64& rng) { return addUniformOutliers(v, box, x, rng); }, j,
+               "outliers: success rate per part", "outliers, % of the part's points");
 }
 
 Eigen::Isometry3d poseOf(const json& d) {
