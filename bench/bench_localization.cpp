@@ -144,6 +144,12 @@ Model modelOf(const ModelLibrary& lib, const std::string& id) {
   return m;
 }
 
+std::shared_ptr<const std::map<std::string, Model>> allModels(const ModelLibrary& lib) {
+  auto models = std::make_shared<std::map<std::string, Model>>();
+  for (const auto& id : lib.ids()) (*models)[id] = modelOf(lib, id);
+  return models;
+}
+
 Eigen::Isometry3d pclIcp(const Model& m, const ScanCloud& scene, const Eigen::Isometry3d& T0) {
   pcl::PointCloud<pcl::PointXYZ>::Ptr src(new pcl::PointCloud<pcl::PointXYZ>), dst(new pcl::PointCloud<pcl::PointXYZ>), out(new pcl::PointCloud<pcl::PointXYZ>);
   for (const auto& p : m.pts->points) src->push_back(pcl::PointXYZ(p.x, p.y, p.z));
@@ -228,8 +234,7 @@ int main(int argc, char** argv) {
   methods.push_back({"cellsight ppf (ours)", ours("ppf")});
   methods.push_back({"cellsight fpfh-ransac (thesis method, ours)", ours("ransac")});
   methods.push_back({"PCL SampleConsensusPrerejective + ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
-                       auto models = std::make_shared<std::map<std::string, Model>>();
-                       for (const auto& id : l->ids()) (*models)[id] = modelOf(*l, id);
+                       const auto models = allModels(*l);
                        return std::function<Eigen::Isometry3d(const Case&)>([models](const Case& c) {
                          const Model& m = models->at(c.model);
                          const PreparedScene s = prepare(c.cloud);
@@ -252,8 +257,7 @@ int main(int argc, char** argv) {
                        });
                      }});
   methods.push_back({"Open3D RANSAC (FPFH) + ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
-                       auto models = std::make_shared<std::map<std::string, Model>>();
-                       for (const auto& id : l->ids()) (*models)[id] = modelOf(*l, id);
+                       const auto models = allModels(*l);
                        return std::function<Eigen::Isometry3d(const Case&)>([models](const Case& c) {
                          const Model& m = models->at(c.model);
                          const PreparedScene s = prepare(c.cloud);
@@ -263,8 +267,7 @@ int main(int argc, char** argv) {
                        });
                      }});
   methods.push_back({"Open3D FGR (FPFH) + ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
-                       auto models = std::make_shared<std::map<std::string, Model>>();
-                       for (const auto& id : l->ids()) (*models)[id] = modelOf(*l, id);
+                       const auto models = allModels(*l);
                        return std::function<Eigen::Isometry3d(const Case&)>([models](const Case& c) {
                          const Model& m = models->at(c.model);
                          const PreparedScene s = prepare(c.cloud);

@@ -68,12 +68,29 @@ TEST(ScannerAcceptance, ReferenceSphereProbingAndMultiOrientationErrors) {
   EXPECT_LT(acc.mpe_al, 0.10e-3);
 }
 
+namespace {
+/// The demo scan (default noise, seed 3) and its clusters, simulated once for the tests below.
+struct DemoScan {
+  Scene scene;
+  ClusteringResult clusters;
+};
+const DemoScan& demoScan() {
+  static const DemoScan d = [] {
+    DemoScan out;
+    out.scene = loadScene(kRoot + "/config/scenes/demo.yaml");
+    ScannerRenderer r(std::make_shared<CellGeometry>(out.scene));
+    const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
+    const ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(out.scene), {}, {}, 3);
+    out.clusters = clusterScene(cloud, loadClusteringConfig(kRoot + "/config/clustering.yaml"));
+    return out;
+  }();
+  return d;
+}
+}  // namespace
+
 TEST(ScannerAcceptance, DemoScanSegmentsIntoOneClusterPerPart) {
-  const Scene s = loadScene(kRoot + "/config/scenes/demo.yaml");
-  ScannerRenderer r(std::make_shared<CellGeometry>(s));
-  const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
-  const ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(s), {}, {}, 3);
-  const ClusteringResult res = clusterScene(cloud, loadClusteringConfig(kRoot + "/config/clustering.yaml"));
+  const Scene& s = demoScan().scene;
+  const ClusteringResult& res = demoScan().clusters;
   ASSERT_TRUE(res.plane_found);
   std::printf("demo scan: %zu points -> %zu after voxel -> %zu above the table -> %zu clusters\n", res.input_points,
               res.after_voxel, res.after_plane, res.clusters.size());
@@ -94,11 +111,8 @@ TEST(ScannerAcceptance, DemoScanSegmentsIntoOneClusterPerPart) {
 }
 
 TEST(ScannerAcceptance, DemoScanPartsAreLocated) {
-  const Scene s = loadScene(kRoot + "/config/scenes/demo.yaml");
-  ScannerRenderer r(std::make_shared<CellGeometry>(s));
-  const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
-  const ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(s), {}, {}, 3);
-  const ClusteringResult res = clusterScene(cloud, loadClusteringConfig(kRoot + "/config/clustering.yaml"));
+  const Scene& s = demoScan().scene;
+  const ClusteringResult& res = demoScan().clusters;
   std::vector<ScanCloud> clusters;
   for (const auto& c : res.clusters) clusters.push_back(c.cloud);
   auto lib = std::make_shared<const ModelLibrary>(kRoot + "/config/models");
