@@ -6,6 +6,7 @@
 // model preprocessing (training, model features) is not. Peers that stop at a coarse pose get
 // PCL's ICP (point to point, 30 iterations), as a user gluing libraries would add.
 // Output: JSON (argv[1], default bench_localization.json) + a Markdown table on stdout.
+// argv[2]: clouds per part (default 8); argv[3]: run only the methods whose name contains it.
 #include <pcl/features/fpfh.h>
 #include <pcl/features/normal_3d.h>
 #include <pcl/filters/voxel_grid.h>
@@ -313,7 +314,9 @@ int main(int argc, char** argv) {
 
   json all = json::array();
   std::printf("| method | success (2 mm / 2°) | median s/scene | peak RSS MB |\n|---|---|---|---|\n");
+  const std::string only = argc > 3 ? argv[3] : "";  // run only the methods whose name contains this
   for (const auto& [name, make] : methods) {
+    if (!only.empty() && name.find(only) == std::string::npos) continue;
     int fd[2];
     if (pipe(fd) != 0) return 1;
     const pid_t pid = fork();

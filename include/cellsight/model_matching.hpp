@@ -40,6 +40,7 @@ struct MatchingConfig {
   double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
   int icp_iterations = 40;
   double icp_max_points = 4000;    ///< scene points used by ICP (thinned evenly above this)
+  double icp_huber_floor = 0.0005;  ///< m; smallest Huber scale of the ICP residuals
   double fitness_radius = 0.002;   ///< m, r_F
   double min_fitness = 0.35;       ///< share of the model's visible points matched (laser shadows hide some)
   double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)

@@ -556,7 +556,10 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     for (size_t i = 0; i < rows.size(); ++i) res[i] = std::abs(rows[i].r);
     std::nth_element(res.begin(), res.begin() + res.size() / 2, res.end());
     const double sigma = std::max(1.4826 * res[res.size() / 2], 1e-5);
-    const double huber = 1.5 * sigma;
+    // Huber scale from the residuals, but not below the floor: with a clean scan sigma is a few
+    // hundredths of a millimetre, and a smaller scale would damp the few points on side walls
+    // and edges — the only ones that fix a flat part's in-plane position — to a crawl.
+    const double huber = std::max(1.5 * sigma, cfg.icp_huber_floor);
     double ss = 0;
     for (const auto& row : rows) {
       const double w = std::abs(row.r) <= huber ? 1.0 : huber / std::abs(row.r);
@@ -575,7 +578,10 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     D.translation() = x.tail<3>();
     X = D * X;
     dmax = std::max(dmin, std::min(dmax, 4 * sigma + cfg.icp_spacing));
-    const bool small = angle < 1e-6 && x.tail<3>().norm() < 1e-7;
+    // converged: the field's correspondences are good to its cell, so stop them at 10 µm steps;
+    // the exact polish stops at 1 µm
+    const double tol = exact ? 1e-6 : 1e-5;
+    const bool small = angle < 10 * tol && x.tail<3>().norm() < tol;
     if (exact) {
       if (++exact_done >= exact_iterations || small) break;
     } else if (small) {
@@ -997,6 +1003,8 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("icp_spacing", c.icp_spacing);
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);
+  c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
+  if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");
   positive("fitness_radius", c.fitness_radius);
   share("min_fitness", c.min_fitness);
   share("min_coverage", c.min_coverage);

@@ -113,9 +113,13 @@ Eigen::Isometry3d randomTablePose(const Eigen::AlignedBox3f& ws, std::mt19937_64
 }
 
 struct Trial {
-  bool success = false;
+  bool success = false;        // within the strict thresholds (--max-t-mm, --max-r-deg)
+  bool success_thesis = false;  // within the thesis's criterion (Δt ≤ 20 mm, ΔR ≤ 7.5°)
   double seconds = 0;
 };
+
+/// The success criterion of the thesis's UWA test (digest §4): Δt ≤ 20 mm, ΔR ≤ 7.5°.
+constexpr double kThesisMaxT = 0.020, kThesisMaxR = 7.5 * M_PI / 180;
 
 Trial runTrial(const ModelMatcher& m, const ModelLibrary& lib, const std::string& id, const ScanCloud& cloud,
                const Eigen::Isometry3d& truth, double max_t, double max_r, bool all_models) {
@@ -127,12 +131,14 @@ Trial runTrial(const ModelMatcher& m, const ModelLibrary& lib, const std::string
     if (d.model != id) continue;
     const PoseError e = poseError(lib.model(id).info, m.centroid(id), d.pose, truth);
     if (e.translation <= max_t && e.rotation <= max_r) t.success = true;
+    if (e.translation <= kThesisMaxT && e.rotation <= kThesisMaxR) t.success_thesis = true;
   }
   if (!t.success && std::getenv("CELLSIGHT_EVAL_VERBOSE")) {
     for (const auto& d : dets) {
       const PoseError e = poseError(lib.model(d.model).info, m.centroid(d.model), d.pose, truth);
-      std::fprintf(stderr, "  miss %s: found %s at %.1f mm %.1f deg (fitness %.2f coverage %.2f)\n", id.c_str(), d.model.c_str(),
-                   e.translation * 1e3, e.rotation / kDeg, d.fitness, d.coverage);
+      const Eigen::Vector3d dt = (truth.inverse() * d.pose).translation() * 1e3;
+      std::fprintf(stderr, "  miss %s: found %s at %.1f mm %.1f deg (model-frame offset %.1f %.1f %.1f mm; fitness %.2f coverage %.2f)\n",
+                   id.c_str(), d.model.c_str(), e.translation * 1e3, e.rotation / kDeg, dt.x(), dt.y(), dt.z(), d.fitness, d.coverage);
     }
     for (const auto& d : st.rejected) {
       const PoseError e = d.model == id ? poseError(lib.model(id).info, m.centroid(id), d.pose, truth) : PoseError{-1, -1};
@@ -157,27 +163,31 @@ int sweep(const Args& a, const Setup& s, const MatchingConfig& cfg, const std::v
   m.prepare({});
   j["models_searched"] = all_models ? "all (identify and locate)" : "the part's own model (locate only)";
   j["success"] = {{"max_t_mm", max_t * 1e3}, {"max_r_deg", max_r / kDeg}};
+  j["success_thesis_criterion"] = {{"max_t_mm", kThesisMaxT * 1e3}, {"max_r_deg", kThesisMaxR / kDeg}};
+  j["min_fitness"] = cfg.min_fitness;
   std::vector<std::pair<std::string, std::vector<double>>> series;
   for (const auto& id : parts) {
-    std::vector<double> rates, times;
+    std::vector<double> rates, rates_thesis, times;
     for (size_t xi = 0; xi < xs.size(); ++xi) {
       std::mt19937_64 rng(seed + 1000 * xi + std::hash<std::string>()(id) % 1000);
-      int ok = 0;
+      int ok = 0, ok_thesis = 0;
       std::vector<double> secs;
       for (int t = 0; t < trials; ++t) {
         const Eigen::Isometry3d truth = randomTablePose(s.workspace, rng);
         const ScanCloud view = singleViewCloud(s.lib->model(id).mesh, truth, s.eye, 0.001, 2e-5, rng());
         const Trial r = runTrial(m, *s.lib, id, degrade(view, xs[xi], rng), truth, max_t, max_r, all_models);
         ok += r.success;
+        ok_thesis += r.success_thesis;
         secs.push_back(r.seconds);
       }
       rates.push_back(100.0 * ok / trials);
+      rates_thesis.push_back(100.0 * ok_thesis / trials);
       times.push_back(median(secs));
-      std::printf("%-8s %s %3.0f %%: success %5.1f %% (median %.3f s)\n", id.c_str(), what.c_str(), xs[xi] * 100,
-                  rates.back(), times.back());
+      std::printf("%-8s %s %3.0f %%: success %5.1f %% (thesis criterion %5.1f %%; median %.3f s)\n", id.c_str(), what.c_str(),
+                  xs[xi] * 100, rates.back(), rates_thesis.back(), times.back());
       std::fflush(stdout);
     }
-    j["parts"][id] = {{"success_percent", rates}, {"median_seconds", times}};
+    j["parts"][id] = {{"success_percent", rates}, {"success_percent_thesis_criterion", rates_thesis}, {"median_seconds", times}};
     series.push_back({id, rates});
   }
   writeJson(a.get("json"), j);
@@ -199,7 +209,12 @@ int runOcclusion(const Args& a) {
   j["trials_per_level"] = trials;
   j["k_s"] = k_s;
   j["levels"] = levels;
-  return sweep(a, s, s.cfg, split(a.get("parts", "blade,housing,holder")), trials, "occlusion", levels, 0,
+  // The validation threshold is a detection policy: F counts the visible model surface seen, so
+  // with a share x deleted F <= 1 - x and the default 0.35 rejects every pose beyond ~65 %.
+  // `--min-fitness` lowers it to measure pose recovery alone (the thesis's test).
+  MatchingConfig cfg = s.cfg;
+  cfg.min_fitness = std::stod(a.get("min-fitness", std::to_string(cfg.min_fitness)));
+  return sweep(a, s, cfg, split(a.get("parts", "blade,housing,holder")), trials, "occlusion", levels, 0,
                [k_s](const ScanCloud& v, double x, std::mt19937_64& rng) { return randomWalkOcclusion(v, x, k_s, rng); }, j,
                "occlusion: success rate per part", "occlusion %");
 }
@@ -375,7 +390,7 @@ int main(int argc, char** argv) {
   const std::string usage =
       "usage: cellsight_evaluate_localization demo --detections detections_raw.json [--scene S.yaml] [--json out.json]\n"
       "       cellsight_evaluate_localization occlusion [--parts blade,housing,holder] [--trials 100] [--from 0.25]\n"
-      "           [--to 0.75] [--step 0.05] [--ks 20] [--json occ.json] [--png occ.png]\n"
+      "           [--to 0.75] [--step 0.05] [--ks 20] [--min-fitness F] [--json occ.json] [--png occ.png]\n"
       "       cellsight_evaluate_localization outliers [--parts ...] [--trials 50] [--ratios 0,0.5,1,2] [--json] [--png]\n"
       "       cellsight_evaluate_localization real --model mesh.ply --scene scene.ply --matching M.yaml [--scale 0.001]\n"
       "           [--json out.json] [--png overlay.png]\n"
