@@ -46,6 +46,11 @@ struct MatchingConfig {
   double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)
   double max_rmse = 0.0015;        ///< m, point-to-plane RMS of the inliers
   bool check_visibility = true;    ///< fitness over points the viewpoint can see
+  /// Parts rest on a support (the table the clustering removed): a pose that puts the model more
+  /// than this below the support plane is not physical and is discarded before validation
+  /// (a thin flat part seen from above fits upside down as well). Used when locate() is given
+  /// the plane; metres.
+  double max_support_penetration = 0.003;
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
   int max_instances = 3;           ///< detections per cluster (touching parts)
@@ -97,9 +102,12 @@ class ModelMatcher {
   /// Finds instances of `models` (empty: all) in each cluster; clusters × models run in
   /// parallel. Throws std::out_of_range for an unknown model id (before any work). Empty or
   /// all-NaN clusters give a warning and no detection.
-  /// `viewpoint` (scene frame) overrides config().viewpoint for this call.
+  /// `viewpoint` (scene frame) overrides config().viewpoint for this call. `support_plane`
+  /// (a, b, c, d of a·x + b·y + c·z + d = 0, unit normal pointing up, scene frame), when given,
+  /// discards poses that sink the model into the support (see max_support_penetration).
   std::vector<PartDetection> locate(const std::vector<ScanCloud>& clusters, const std::vector<std::string>& models,
-                                MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr) const;
+                                MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
+                                const Eigen::Vector4f* support_plane = nullptr) const;
 
   /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
   /// first locate(); unknown ids throw std::out_of_range.

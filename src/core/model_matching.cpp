@@ -206,6 +206,7 @@ struct ModelMatcher::ModelIndex {
   bool has_mesh = true;  // false for a cloud model: visibility from the normals only
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   float diameter = 0;
+  std::vector<Vec3> extremes;  // mesh vertices (cloud models: coarse points), for the support test
 };
 
 namespace {
@@ -478,8 +479,10 @@ std::vector<Hypothesis> ppfVoting(const ScanCloud& scene, const ModelMatcher::Mo
 }
 
 /// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
+float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane);
+
 std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
-                                      int* iterations) {
+                                      const Eigen::Vector4f* support, int* iterations) {
   std::vector<Hypothesis> votes = ppfVoting(s.ppf, m, cfg.ppf_ref_step);
   *iterations = static_cast<int>(votes.size());
   std::sort(votes.begin(), votes.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
@@ -489,7 +492,10 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
   std::vector<Hypothesis> top;
   const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
+  // a coarse pose may be a few millimetres off: only clearly sunken ones are dropped here
+  const float sunk = static_cast<float>(cfg.max_support_penetration + 2 * cfg.inlier_distance);
   for (auto& v : votes) {
+    if (support && belowSupport(m, v.T, *support) > sunk) continue;
     v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), static_cast<int>(order.size()) + 1, 0.0);
     bool merged = false;
     for (auto& h : top) {
@@ -637,14 +643,21 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   return visible ? static_cast<double>(matched) / visible : 0.0;
 }
 
+/// How far the model under T reaches below the support plane (m; <= 0: not at all).
+float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane) {
+  float lowest = std::numeric_limits<float>::infinity();
+  for (const auto& v : m.extremes) lowest = std::min(lowest, plane.head<3>().dot(T * v) + plane.w());
+  return m.extremes.empty() ? 0.f : -lowest;
+}
+
 PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
-                    uint64_t seed) {
+                    const Eigen::Vector4f* support, uint64_t seed) {
   PartDetection d;
   d.model = m.id;
   d.matcher = cfg.coarse;
   std::vector<Hypothesis> candidates;
   if (cfg.coarse == "ppf") {
-    candidates = ppfHypotheses(s, m, cfg, &d.iterations);
+    candidates = ppfHypotheses(s, m, cfg, support, &d.iterations);
   } else if (cfg.coarse == "fgr") {
     std::vector<Vec3> sp, mp;
     std::vector<Fpfh> sf, mf;
@@ -675,6 +688,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
     if (!h.T.matrix().allFinite()) continue;
     const Refined r = icp(s, m, h.T, cfg);
     if (!r.T.matrix().allFinite()) continue;
+    if (support && belowSupport(m, r.T, *support) > cfg.max_support_penetration) continue;
     PartDetection c = d;
     c.pose = r.T.cast<double>();
     c.rmse = r.rmse;
@@ -825,6 +839,11 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
   for (const auto& p : m->fine->points) m->centroid += p.cast<double>();
   if (!m->fine->points.empty()) m->centroid /= static_cast<double>(m->fine->size());
   m->diameter = e.bounds.diagonal().norm();
+  if (!e.mesh.faces.empty()) {
+    for (const auto& v : e.mesh.vertices) m->extremes.push_back(v.cast<float>());
+  } else {
+    m->extremes = m->coarse->points;
+  }
   // distance field: cells of ≈ 1/3 of the coarse inlier distance (at most 4 M cells); each
   // fine point claims the cells within the margin whose centre it is nearest to
   const float margin = static_cast<float>(std::max(2 * config_.inlier_distance, 6 * config_.icp_spacing));
@@ -872,7 +891,7 @@ Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return 
 
 std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
                                             const std::vector<std::string>& models_in, MatchStats* stats,
-                                            const Eigen::Vector3f* viewpoint) const {
+                                            const Eigen::Vector3f* viewpoint, const Eigen::Vector4f* support_plane) const {
   const auto t0 = Clock::now();
   MatchingConfig cfg = config_;
   if (viewpoint) cfg.viewpoint = *viewpoint;
@@ -925,7 +944,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       const auto [w, m] = pairs[k];
       if (round[w].scene->coarse.size() < 3) return;
       const uint64_t seed = cfg.seed + 7919 * static_cast<uint64_t>(round[w].cluster) + 104729 * m + 15485863ull * instance;
-      round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], cfg, seed);
+      round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], cfg, support_plane, seed);
       round[w].per_model[m].cluster = round[w].cluster;
     });
     std::vector<Work> next;
@@ -1012,6 +1031,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.check_visibility = m.getBool("check_visibility", c.check_visibility);
   if (m.has("viewpoint")) c.viewpoint = m.getVector3("viewpoint").cast<float>();
   positive("max_view_angle", c.max_view_angle);
+  positive("max_support_penetration", c.max_support_penetration);
   c.max_instances = m.getInt("max_instances", c.max_instances);
   c.min_instance_points = m.getInt("min_instance_points", c.min_instance_points);
   c.threads = m.getInt("threads", c.threads);

@@ -115,7 +115,10 @@ class ModelMatching {
     }
     const Eigen::Vector3f eye = T_frame_camera.translation().cast<float>();
     cellsight::MatchStats stats;
-    const auto dets = matcher_->locate(clusters, models, &stats, &eye);
+    const Eigen::Vector4f support(static_cast<float>(msg.support_plane[0]), static_cast<float>(msg.support_plane[1]),
+                                  static_cast<float>(msg.support_plane[2]), static_cast<float>(msg.support_plane[3]));
+    const bool use_support = msg.support_found && support.allFinite() && std::abs(support.head<3>().norm() - 1.f) < 1e-3f;
+    const auto dets = matcher_->locate(clusters, models, &stats, &eye, use_support ? &support : nullptr);
     out->header = msg.header;
     out->clusters = static_cast<uint32_t>(clusters.size());
     out->locate_seconds = stats.seconds;

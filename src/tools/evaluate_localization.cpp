@@ -125,7 +125,8 @@ Trial runTrial(const ModelMatcher& m, const ModelLibrary& lib, const std::string
                const Eigen::Isometry3d& truth, double max_t, double max_r, bool all_models) {
   Trial t;
   MatchStats st;
-  const auto dets = m.locate({cloud}, all_models ? std::vector<std::string>{} : std::vector<std::string>{id}, &st);
+  const Eigen::Vector4f table(0, 0, 1, 0);  // the parts rest on the table, z = 0 in the base frame
+  const auto dets = m.locate({cloud}, all_models ? std::vector<std::string>{} : std::vector<std::string>{id}, &st, nullptr, &table);
   t.seconds = st.seconds;
   for (const auto& d : dets) {
     if (d.model != id) continue;
