@@ -39,7 +39,8 @@ struct MatchingConfig {
   int refine_candidates = 3;       ///< distinct coarse hypotheses refined by ICP per model
   double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
   int icp_iterations = 40;
-  double icp_max_points = 4000;    ///< scene points used by ICP (thinned evenly above this)
+  double icp_max_points = 4000;    ///< scene points used by the final ICP (thinned evenly above this)
+  double icp_screen_points = 1000; ///< scene points used to refine and rank the coarse candidates
   double icp_huber_floor = 0.0005;  ///< m; smallest Huber scale of the ICP residuals
   double fitness_radius = 0.002;   ///< m, r_F
   double min_fitness = 0.35;       ///< share of the model's visible points matched (laser shadows hide some)
@@ -69,10 +70,14 @@ struct PartDetection {
   int cluster = -1;      ///< index of the input cluster
   int iterations = 0;    ///< RANSAC hypotheses drawn
   std::string matcher;   ///< the coarse stage: "ppf", "ransac" or "fgr"
+  double coarse_seconds = 0, refine_seconds = 0;  ///< CPU time of the stages for this pair
 };
 
 struct MatchStats {
   double seconds = 0;
+  /// CPU seconds per stage, summed over clusters and (cluster, model) pairs (threads overlap):
+  /// scene preparation (voxels, normals), coarse (PPF/RANSAC/FGR), refinement (ICP, validation)
+  double scene_seconds = 0, coarse_seconds = 0, refine_seconds = 0;
   size_t pairs = 0, pairs_skipped_by_size = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;

@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <map>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -120,14 +121,54 @@ struct PpfTable {
     int32_t ref;
     float alpha;
   };
-  std::vector<uint64_t> keys;  // sorted
-  std::vector<Entry> entries;  // same order
+  std::vector<Entry> entries;    // sorted by key
+  std::vector<uint32_t> offset;  // entries of key k: [offset[k], offset[k + 1]) (dense: O(1) lookup)
   std::pair<size_t, size_t> range(uint64_t key) const {
-    auto lo = std::lower_bound(keys.begin(), keys.end(), key);
-    auto hi = std::upper_bound(lo, keys.end(), key);
-    return {static_cast<size_t>(lo - keys.begin()), static_cast<size_t>(hi - keys.begin())};
+    if (key + 1 >= offset.size()) return {0, 0};
+    return {offset[key], offset[key + 1]};
   }
 };
+
+/// Angle bin of a cosine (acos quantised through a table: the same function builds the model
+/// table and keys the scene, so the bins only need to be consistent, and 8192 steps of the
+/// cosine keep them within a fraction of a bin of acos).
+class AngleBins {
+ public:
+  explicit AngleBins(int bins) : lut_(kSize + 1) {
+    for (int i = 0; i <= kSize; ++i) {
+      const float c = -1.f + 2.f * static_cast<float>(i) / kSize;
+      lut_[i] = static_cast<uint8_t>(std::min(bins - 1, static_cast<int>(std::acos(c) * bins / static_cast<float>(M_PI))));
+    }
+  }
+  int operator()(float c) const {
+    const int i = static_cast<int>((std::clamp(c, -1.f, 1.f) + 1.f) * (0.5f * kSize) + 0.5f);
+    return lut_[i];
+  }
+
+ private:
+  static constexpr int kSize = 8192;
+  std::vector<uint8_t> lut_;
+};
+
+const AngleBins& angleBins(int bins) {
+  static thread_local std::map<int, std::unique_ptr<AngleBins>> cache;
+  auto& b = cache[bins];
+  if (!b) b = std::make_unique<AngleBins>(bins);
+  return *b;
+}
+
+/// atan2 to within 1e-5 rad (a minimax polynomial on [0, 1] and octant folding): PPF angles are
+/// binned in 12° steps, so libm's exactness only costs time in the voting loop.
+float fastAtan2(float y, float x) {
+  const float ax = std::abs(x), ay = std::abs(y);
+  const float mx = std::max(ax, ay), mn = std::min(ax, ay);
+  if (mx == 0.f) return 0.f;
+  const float a = mn / mx, s = a * a;
+  float r = a * (0.99997726f + s * (-0.33262347f + s * (0.19354346f + s * (-0.11643287f + s * (0.05265332f + s * -0.0117212f)))));
+  if (ay > ax) r = static_cast<float>(M_PI_2) - r;
+  if (x < 0.f) r = static_cast<float>(M_PI) - r;
+  return y < 0.f ? -r : r;
+}
 
 /// Transform taking p to the origin and n onto +x.
 Eigen::Isometry3f toLocalFrame(const Vec3& p, const Vec3& n) {
@@ -139,7 +180,7 @@ Eigen::Isometry3f toLocalFrame(const Vec3& p, const Vec3& n) {
 
 float pairAlpha(const Eigen::Isometry3f& local, const Vec3& p2) {
   const Vec3 q = local * p2;
-  return std::atan2(-q.z(), q.y());
+  return fastAtan2(-q.z(), q.y());
 }
 
 bool ppfKey(const Vec3& p1, const Vec3& n1, const Vec3& p2, const Vec3& n2, float dist_step, int bins, uint64_t* key) {
@@ -147,8 +188,7 @@ bool ppfKey(const Vec3& p1, const Vec3& n1, const Vec3& p2, const Vec3& n2, floa
   const float len = d.norm();
   if (len < 1e-6f) return false;
   const Vec3 du = d / len;
-  const float k = bins / static_cast<float>(M_PI);
-  auto q = [&](float c) { return std::min(bins - 1, static_cast<int>(std::acos(std::clamp(c, -1.f, 1.f)) * k)); };
+  const AngleBins& q = angleBins(bins);
   const uint64_t f1 = static_cast<uint64_t>(len / dist_step);
   *key = (((f1 * bins + q(n1.dot(du))) * bins + q(n2.dot(du))) * bins) + q(n1.dot(n2));
   return true;
@@ -172,19 +212,19 @@ PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins) {
   // Features shared by very many pairs (two points on one large flat face differ only in their
   // distance) say little about the pose and cost most of the voting: leave them out.
   const size_t max_bucket = std::max<size_t>(256, all.size() / 4000);
-  t.keys.reserve(all.size());
   t.entries.reserve(all.size());
+  t.offset.assign(all.empty() ? 1 : all.back().first + 2, 0);
   for (size_t a = 0; a < all.size();) {
     size_t b = a;
     while (b < all.size() && all[b].first == all[a].first) ++b;
     if (b - a <= max_bucket) {
-      for (size_t k = a; k < b; ++k) {
-        t.keys.push_back(all[k].first);
-        t.entries.push_back(all[k].second);
-      }
+      for (size_t k = a; k < b; ++k) t.entries.push_back(all[k].second);
     }
+    t.offset[all[a].first + 1] = static_cast<uint32_t>(t.entries.size());  // end of this key
     a = b;
   }
+  // keys without entries end where the previous key ended
+  for (size_t k = 1; k < t.offset.size(); ++k) t.offset[k] = std::max(t.offset[k], t.offset[k - 1]);
   return t;
 }
 
@@ -519,8 +559,10 @@ struct Refined {
 
 /// Robust point-to-plane ICP of the scene points onto the model (Huber weights, shrinking
 /// correspondence distance); distance-field correspondences, then exact ones.
+/// `max_points`: the scene points used (evenly thinned); `polish`: finish with exact neighbours.
 Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T0,
-            const MatchingConfig& cfg) {
+            const MatchingConfig& cfg, size_t max_points, bool polish) {
+  const size_t stride = std::max<size_t>(1, (s.icp_points.size() + max_points - 1) / std::max<size_t>(1, max_points));
   Eigen::Isometry3d X = T0.inverse().cast<double>();  // scene → model
   const auto& fp = m.fine->points;
   const auto& fn = m.fine->normals;
@@ -532,7 +574,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
   std::vector<int> idx(1);
   std::vector<float> d2(1);
   std::vector<double> res;
-  for (int it = 0; it < cfg.icp_iterations + exact_iterations; ++it) {
+  for (int it = 0; it < cfg.icp_iterations + (polish ? exact_iterations : 0); ++it) {
     const bool exact = it >= cfg.icp_iterations || exact_done > 0;
     Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
     Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
@@ -541,8 +583,9 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
       double r;
     };
     std::vector<Row> rows;
-    rows.reserve(s.icp_points.size());
-    for (const auto& p : s.icp_points) {
+    rows.reserve(s.icp_points.size() / stride + 1);
+    for (size_t pi = 0; pi < s.icp_points.size(); pi += stride) {
+      const Vec3& p = s.icp_points[pi];
       const Eigen::Vector3d q = X * p.cast<double>();
       int j;
       if (exact) {
@@ -591,6 +634,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     if (exact) {
       if (++exact_done >= exact_iterations || small) break;
     } else if (small) {
+      if (!polish) break;
       exact_done = 1;  // converged on the field: polish with exact neighbours
     }
   }
@@ -656,6 +700,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   d.model = m.id;
   d.matcher = cfg.coarse;
   std::vector<Hypothesis> candidates;
+  const auto t_coarse = Clock::now();
   if (cfg.coarse == "ppf") {
     candidates = ppfHypotheses(s, m, cfg, support, &d.iterations);
   } else if (cfg.coarse == "fgr") {
@@ -683,24 +728,42 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   } else {
     candidates = ransac(s, m, correspondences(s, m, cfg), cfg, seed, &d.iterations);
   }
+  d.coarse_seconds = seconds(t_coarse);
+  const auto t_refine = Clock::now();
   double best = -1;
+  // Every candidate is refined on a thinned scene (distance-field neighbours only) and scored;
+  // the best one is then refined on all the ICP points and polished with exact neighbours.
+  auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, PartDetection* c) {
+    const Refined r = icp(s, m, T0, cfg, points, polish);
+    if (!r.T.matrix().allFinite()) return false;
+    if (support && belowSupport(m, r.T, *support) > cfg.max_support_penetration) return false;
+    *c = d;
+    c->pose = r.T.cast<double>();
+    c->rmse = r.rmse;
+    c->coverage = coverage(s, m, r.T, cfg.fitness_radius);
+    c->fitness = visibleFitness(s, m, r.T, cfg);
+    c->score = c->fitness * (cfg.min_coverage > 0 ? c->coverage : 1.0);
+    return true;
+  };
+  const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
+  const size_t screen_points = std::min(all_points, static_cast<size_t>(std::max(100.0, cfg.icp_screen_points)));
+  PartDetection chosen = d;
   for (const auto& h : candidates) {
     if (!h.T.matrix().allFinite()) continue;
-    const Refined r = icp(s, m, h.T, cfg);
-    if (!r.T.matrix().allFinite()) continue;
-    if (support && belowSupport(m, r.T, *support) > cfg.max_support_penetration) continue;
-    PartDetection c = d;
-    c.pose = r.T.cast<double>();
-    c.rmse = r.rmse;
-    c.coverage = coverage(s, m, r.T, cfg.fitness_radius);
-    c.fitness = visibleFitness(s, m, r.T, cfg);
-    c.score = c.fitness * (cfg.min_coverage > 0 ? c.coverage : 1.0);
-    if (c.score > best) {
+    PartDetection c;
+    if (evaluate(h.T, screen_points, false, &c) && c.score > best) {
       best = c.score;
-      d = c;
+      chosen = c;
     }
   }
-  return d;
+  PartDetection fine;
+  if (best < 0) {
+    fine = d;
+  } else if (!evaluate(chosen.pose.cast<float>(), all_points, true, &fine)) {
+    fine = chosen;
+  }
+  fine.refine_seconds = seconds(t_refine);
+  return fine;
 }
 
 bool accepted(const PartDetection& d, const MatchingConfig& cfg) {
@@ -907,6 +970,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     int cluster;
     std::vector<Vec3> points;
     std::unique_ptr<SceneData> scene;
+    double scene_seconds = 0;
     std::vector<PartDetection> per_model;
   };
   std::vector<PartDetection> out;
@@ -925,7 +989,12 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     round.push_back(std::move(w));
   }
   for (int instance = 0; instance < std::max(1, cfg.max_instances) && !round.empty(); ++instance) {
-    parallelFor(round.size(), cfg.threads, [&](size_t i) { round[i].scene = prepareScene(round[i].points, cfg); });
+    parallelFor(round.size(), cfg.threads, [&](size_t i) {
+      const auto t = Clock::now();
+      round[i].scene = prepareScene(round[i].points, cfg);
+      round[i].scene_seconds = seconds(t);
+    });
+    for (const auto& w : round) st.scene_seconds += w.scene_seconds;
     std::vector<std::pair<size_t, size_t>> pairs;
     for (size_t w = 0; w < round.size(); ++w) {
       round[w].per_model.assign(models.size(), PartDetection());
@@ -953,6 +1022,8 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       size_t best_m = 0;
       for (size_t m = 0; m < models.size(); ++m) {
         const PartDetection& d = w.per_model[m];
+        st.coarse_seconds += d.coarse_seconds;
+        st.refine_seconds += d.refine_seconds;
         if (!d.model.empty() && !accepted(d, cfg)) st.rejected.push_back(d);
         if (accepted(d, cfg) && (!best || d.score > best->score)) {
           best = &d;
@@ -1005,7 +1076,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("ppf_sampling", c.ppf_sampling);
   positive("ppf_distance_step", c.ppf_distance_step);
   c.ppf_angle_bins = m.getInt("ppf_angle_bins", c.ppf_angle_bins);
-  if (c.ppf_angle_bins < 4) m.fail("ppf_angle_bins", "must be >= 4");
+  if (c.ppf_angle_bins < 4 || c.ppf_angle_bins > 255) m.fail("ppf_angle_bins", "must be in [4, 255]");
   c.ppf_ref_step = m.getInt("ppf_ref_step", c.ppf_ref_step);
   if (c.ppf_ref_step < 1) m.fail("ppf_ref_step", "must be >= 1");
   c.ppf_candidates = m.getInt("ppf_candidates", c.ppf_candidates);
@@ -1022,6 +1093,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("icp_spacing", c.icp_spacing);
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);
+  positive("icp_screen_points", c.icp_screen_points);
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
   if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");
   positive("fitness_radius", c.fitness_radius);

@@ -116,6 +116,7 @@ struct Trial {
   bool success = false;        // within the strict thresholds (--max-t-mm, --max-r-deg)
   bool success_thesis = false;  // within the thesis's criterion (Δt ≤ 20 mm, ΔR ≤ 7.5°)
   double seconds = 0;
+  double stage[3] = {0, 0, 0};  // scene preparation, coarse, refinement (CPU s)
 };
 
 /// The success criterion of the thesis's UWA test (digest §4): Δt ≤ 20 mm, ΔR ≤ 7.5°.
@@ -128,6 +129,9 @@ Trial runTrial(const ModelMatcher& m, const ModelLibrary& lib, const std::string
   const Eigen::Vector4f table(0, 0, 1, 0);  // the parts rest on the table, z = 0 in the base frame
   const auto dets = m.locate({cloud}, all_models ? std::vector<std::string>{} : std::vector<std::string>{id}, &st, nullptr, &table);
   t.seconds = st.seconds;
+  t.stage[0] = st.scene_seconds;
+  t.stage[1] = st.coarse_seconds;
+  t.stage[2] = st.refine_seconds;
   for (const auto& d : dets) {
     if (d.model != id) continue;
     const PoseError e = poseError(lib.model(id).info, m.centroid(id), d.pose, truth);
@@ -172,7 +176,7 @@ int sweep(const Args& a, const Setup& s, const MatchingConfig& cfg, const std::v
     for (size_t xi = 0; xi < xs.size(); ++xi) {
       std::mt19937_64 rng(seed + 1000 * xi + std::hash<std::string>()(id) % 1000);
       int ok = 0, ok_thesis = 0;
-      std::vector<double> secs;
+      std::vector<double> secs, stage[3];
       for (int t = 0; t < trials; ++t) {
         const Eigen::Isometry3d truth = randomTablePose(s.workspace, rng);
         const ScanCloud view = singleViewCloud(s.lib->model(id).mesh, truth, s.eye, 0.001, 2e-5, rng());
@@ -180,12 +184,14 @@ int sweep(const Args& a, const Setup& s, const MatchingConfig& cfg, const std::v
         ok += r.success;
         ok_thesis += r.success_thesis;
         secs.push_back(r.seconds);
+        for (int k = 0; k < 3; ++k) stage[k].push_back(r.stage[k]);
       }
       rates.push_back(100.0 * ok / trials);
       rates_thesis.push_back(100.0 * ok_thesis / trials);
       times.push_back(median(secs));
-      std::printf("%-8s %s %3.0f %%: success %5.1f %% (thesis criterion %5.1f %%; median %.3f s)\n", id.c_str(), what.c_str(),
-                  xs[xi] * 100, rates.back(), rates_thesis.back(), times.back());
+      std::printf("%-8s %s %3.0f %%: success %5.1f %% (thesis criterion %5.1f %%; median %.3f s: scene %.3f coarse %.3f refine %.3f)\n",
+                  id.c_str(), what.c_str(), xs[xi] * 100, rates.back(), rates_thesis.back(), times.back(), median(stage[0]),
+                  median(stage[1]), median(stage[2]));
       std::fflush(stdout);
     }
     j["parts"][id] = {{"success_percent", rates}, {"success_percent_thesis_criterion", rates_thesis}, {"median_seconds", times}};
