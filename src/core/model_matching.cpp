@@ -568,7 +568,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
   const auto& fn = m.fine->normals;
   double dmax = std::max(2 * cfg.inlier_distance, 4 * cfg.icp_spacing);
   const double dmin = std::max(3 * cfg.icp_spacing, 0.5 * cfg.fitness_radius);
-  const int exact_iterations = 6;
+  const int exact_iterations = cfg.icp_exact_iterations;
   double rmse = 0;
   int exact_done = 0;
   std::vector<int> idx(1);
@@ -1094,6 +1094,8 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);
   positive("icp_screen_points", c.icp_screen_points);
+  c.icp_exact_iterations = m.getInt("icp_exact_iterations", c.icp_exact_iterations);
+  if (c.icp_exact_iterations < 0) m.fail("icp_exact_iterations", "must be >= 0");
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
   if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");
   positive("fitness_radius", c.fitness_radius);
