@@ -10,7 +10,13 @@
 #include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <exception>
 #include <mutex>
+#include <thread>
 #include <nlohmann/json.hpp>
 
 #include "cellsight/ClusterArray.h"
@@ -42,7 +48,19 @@ class ModelMatching {
     // the viewpoint comes per scan from tf; build the per-model data now, not on the first scan
     matcher_ = std::make_unique<cellsight::ModelMatcher>(library_, config_);
     const ros::WallTime t0 = ros::WallTime::now();
-    matcher_->prepare({});
+    // Preparation is seconds of CPU at start-up, when the scanner nodes start too: run it at a
+    // lower priority (its worker threads inherit it) so a 2-core cell PC keeps serving images.
+    std::exception_ptr failure;
+    std::thread([&] {
+      if (setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10) != 0)
+        ROS_DEBUG("model_matching: could not lower the preparation's priority");
+      try {
+        matcher_->prepare({});
+      } catch (...) {
+        failure = std::current_exception();
+      }
+    }).join();
+    if (failure) std::rethrow_exception(failure);
     ROS_INFO("model_matching: %zu models ready in %.2f s (coarse stage: %s)", library_->ids().size(),
              (ros::WallTime::now() - t0).toSec(), config_.coarse.c_str());
     detections_pub_ = nh.advertise<cellsight::DetectionArray>("detections", 1, true);
