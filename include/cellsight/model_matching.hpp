@@ -61,6 +61,10 @@ struct MatchingConfig {
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
   int max_instances = 3;           ///< detections per cluster (touching parts)
   int min_instance_points = 60;    ///< leftover cluster points worth another search
+  /// Larger clusters (a whole scene of millions of points sent to the service) are thinned to a
+  /// voxel grid of icp_spacing, then evenly, to at most this many points, with a warning: time
+  /// and memory stay bounded.
+  double max_cluster_points = 300000;
   int threads = 0;                 ///< 0: hardware concurrency
   uint64_t seed = 42;
 };

@@ -334,6 +334,21 @@ std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const M
   return s;
 }
 
+/// At most `cap` points: a voxel grid of `leaf` (cell centroids), then every k-th point.
+std::vector<Vec3> capPoints(const std::vector<Vec3>& pts, double leaf, size_t cap) {
+  pcl::VoxelGrid<pcl::PointXYZ> vg;
+  vg.setInputCloud(toXyz(pts));
+  const float l = static_cast<float>(leaf);
+  vg.setLeafSize(l, l, l);
+  pcl::PointCloud<pcl::PointXYZ> v;
+  vg.filter(v);
+  const size_t step = (v.size() + cap - 1) / cap;
+  std::vector<Vec3> out;
+  out.reserve(cap);
+  for (size_t i = 0; i < v.size(); i += std::max<size_t>(1, step)) out.push_back(v[i].getVector3fMap());
+  return out;
+}
+
 struct Correspondence {
   int scene, model;
 };
@@ -986,6 +1001,14 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
                             " finite points, nothing to match");
       continue;
     }
+    const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
+    if (w.points.size() > cap) {
+      const size_t before = w.points.size();
+      w.points = capPoints(w.points, cfg.icp_spacing, cap);
+      st.warnings.push_back("cluster " + std::to_string(c) + ": " + std::to_string(before) +
+                            " points, above max_cluster_points " + std::to_string(cap) + ": thinned to " +
+                            std::to_string(w.points.size()) + " (crop the scene or raise the limit)");
+    }
     round.push_back(std::move(w));
   }
   for (int instance = 0; instance < std::max(1, cfg.max_instances) && !round.empty(); ++instance) {
@@ -1094,6 +1117,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);
   positive("icp_screen_points", c.icp_screen_points);
+  positive("max_cluster_points", c.max_cluster_points);
   c.icp_exact_iterations = m.getInt("icp_exact_iterations", c.icp_exact_iterations);
   if (c.icp_exact_iterations < 0) m.fail("icp_exact_iterations", "must be >= 0");
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);

@@ -134,6 +134,19 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
   ASSERT_EQ(st.warnings.size(), 2u);
   EXPECT_NE(st.warnings[1].find("0 finite points"), std::string::npos) << st.warnings[1];
   EXPECT_NE(errorOf([&] { m.locate({empty}, {"no_such_part"}); }).find("unknown model 'no_such_part'"), std::string::npos);
+  // a cluster above max_cluster_points is thinned with a warning and still located
+  MatchingConfig capped = config();
+  capped.max_cluster_points = 1000;
+  const Eigen::Isometry3d truth = onTable(0.5, 0.0, 0.9);
+  const ScanCloud view = singleViewCloud(library()->model("housing").mesh, truth, kEye, 0.0005, 2e-5, 5);
+  ASSERT_GT(view.size(), 4000u);
+  ModelMatcher mc(library(), capped);
+  MatchStats cs;
+  const auto found = mc.locate({view}, {"housing"}, &cs);
+  ASSERT_EQ(cs.warnings.size(), 1u);
+  EXPECT_NE(cs.warnings[0].find("above max_cluster_points 1000: thinned to"), std::string::npos) << cs.warnings[0];
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_LT(poseError(library()->model("housing").info, mc.centroid("housing"), found[0].pose, truth).translation, 1e-3);
   MatchingConfig bad = config();
   bad.coarse = "magic";
   EXPECT_THROW(ModelMatcher(library(), bad), std::invalid_argument);
