@@ -123,7 +123,15 @@ struct PpfTable {
   };
   std::vector<Entry> entries;    // sorted by key
   std::vector<uint32_t> offset;  // entries of key k: [offset[k], offset[k + 1]) (dense: O(1) lookup)
+  std::vector<uint64_t> keys;    // instead of `offset` when the key range is too large for it:
+                                 // each entry's key, searched (two binary searches)
+  static constexpr uint64_t kMaxDenseKeys = 1ull << 24;  // 64 MB of offsets
   std::pair<size_t, size_t> range(uint64_t key) const {
+    if (!keys.empty()) {
+      auto lo = std::lower_bound(keys.begin(), keys.end(), key);
+      auto hi = std::upper_bound(lo, keys.end(), key);
+      return {static_cast<size_t>(lo - keys.begin()), static_cast<size_t>(hi - keys.begin())};
+    }
     if (key + 1 >= offset.size()) return {0, 0};
     return {offset[key], offset[key + 1]};
   }
@@ -213,14 +221,18 @@ PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins) {
   // distance) say little about the pose and cost most of the voting: leave them out.
   const size_t max_bucket = std::max<size_t>(256, all.size() / 4000);
   t.entries.reserve(all.size());
-  t.offset.assign(all.empty() ? 1 : all.back().first + 2, 0);
+  const bool dense = all.empty() || all.back().first + 2 <= PpfTable::kMaxDenseKeys;
+  if (dense) t.offset.assign(all.empty() ? 1 : all.back().first + 2, 0);
   for (size_t a = 0; a < all.size();) {
     size_t b = a;
     while (b < all.size() && all[b].first == all[a].first) ++b;
     if (b - a <= max_bucket) {
-      for (size_t k = a; k < b; ++k) t.entries.push_back(all[k].second);
+      for (size_t k = a; k < b; ++k) {
+        t.entries.push_back(all[k].second);
+        if (!dense) t.keys.push_back(all[k].first);
+      }
     }
-    t.offset[all[a].first + 1] = static_cast<uint32_t>(t.entries.size());  // end of this key
+    if (dense) t.offset[all[a].first + 1] = static_cast<uint32_t>(t.entries.size());  // end of this key
     a = b;
   }
   // keys without entries end where the previous key ended

@@ -125,6 +125,22 @@ TEST(ModelMatching, SupportPlaneDiscardsSunkenPoses) {
   EXPECT_TRUE(m.locate({view}, {"blade"}, &st, nullptr, &above).empty());
 }
 
+// Fine PPF bins make the key range too large for the table's dense index (> 2^24 keys): the
+// table falls back to searching its sorted keys and must find the same part.
+TEST(ModelMatching, FinePpfBinsUseTheSearchedTable) {
+  MatchingConfig c = config();
+  c.ppf_angle_bins = 64;
+  c.ppf_distance_step = 0.0005;
+  ModelMatcher m(library(), c);
+  const Eigen::Isometry3d truth = onTable(0.5, -0.02, 1.1);
+  const ScanCloud view = singleViewCloud(library()->model("bracket").mesh, truth, kEye, 0.001, 2e-5, 21);
+  const auto d = m.locate({view}, {"bracket"});
+  ASSERT_EQ(d.size(), 1u);
+  const PoseError e = poseError(library()->model("bracket").info, m.centroid("bracket"), d[0].pose, truth);
+  EXPECT_LT(e.translation, 1e-3);
+  EXPECT_LT(e.rotation, 1 * M_PI / 180);
+}
+
 TEST(ModelMatching, BadInputGivesClearStatus) {
   ModelMatcher m(library(), config());
   ScanCloud empty, nan;
