@@ -12,6 +12,7 @@
 #include <tf2_ros/transform_listener.h>
 
 #include <condition_variable>
+#include <deque>
 #include <mutex>
 
 #include "cellsight/FinishScan.h"
@@ -61,16 +62,38 @@ class Triangulation {
       ROS_ERROR_THROTTLE(5.0, "triangulation: unusable camera_info: %s", e.what());
       return;
     }
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::unique_lock<std::mutex> lock(mutex_);
     if (map_ && map_->camera().fx == K.fx && map_->camera().fy == K.fy && map_->camera().cx == K.cx &&
         map_->camera().cy == K.cy && map_->camera().dist == K.dist && map_->camera().width == K.width &&
         map_->camera().height == K.height)
       return;
     map_ = std::make_shared<cellsight::UndistortionMap>(K);
     ROS_INFO("triangulation: camera intrinsics %dx%d fx %.1f from camera_info", K.width, K.height, K.fx);
+    // frames that came before the first camera_info (the camera publishes both at once, but
+    // the two topics race at start-up) are processed now rather than lost
+    std::deque<Frame> held;
+    held.swap(held_);
+    lock.unlock();
+    for (const auto& f : held) onFrame(f.first, f.second);
   }
 
   void onFrame(const sensor_msgs::ImageConstPtr& image, const cellsight::LaserPlaneStampedConstPtr& plane_msg) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!map_) {
+        if (held_.size() >= kMaxHeldFrames) {
+          ROS_WARN("triangulation: still no camera_info on scanner_camera/camera_info after %zu frames: "
+                   "the oldest is dropped; is the camera driver publishing it?", held_.size());
+          held_.pop_front();
+          ++frames_;
+          cv_.notify_all();
+        }
+        ROS_WARN_THROTTLE(5.0, "triangulation: no camera_info yet on scanner_camera/camera_info: frames are held "
+                               "until it arrives");
+        held_.emplace_back(image, plane_msg);
+        return;
+      }
+    }
     try {
       processFrame(image, plane_msg);
     } catch (const std::exception& e) {
@@ -148,6 +171,7 @@ class Triangulation {
     scan_ = cellsight::ScanCloud();
     scan_.frame_id = base_frame_;
     frames_ = 0;
+    held_.clear();
     res.success = true;
     res.message = "scan cleared";
     return true;
@@ -223,6 +247,9 @@ class Triangulation {
   std::mutex mutex_;
   std::condition_variable cv_;
   std::shared_ptr<const cellsight::UndistortionMap> map_;
+  using Frame = std::pair<sensor_msgs::ImageConstPtr, cellsight::LaserPlaneStampedConstPtr>;
+  static constexpr size_t kMaxHeldFrames = 50;
+  std::deque<Frame> held_;  // frames that came before the first camera_info
   cellsight::ScanCloud scan_;
   uint32_t frames_ = 0;
   Eigen::Vector3f camera_center_ = Eigen::Vector3f::Zero();
