@@ -110,10 +110,7 @@ class Triangulation {
       std::lock_guard<std::mutex> lock(mutex_);
       map = map_;
     }
-    if (!map) {
-      ROS_WARN_THROTTLE(5.0, "triangulation: no camera_info yet on scanner_camera/camera_info: frames are dropped");
-      return;
-    }
+    // not null: onFrame holds frames back until the first camera_info, and map_ is never reset
     if (static_cast<int>(image->width) != map->camera().width || static_cast<int>(image->height) != map->camera().height) {
       ROS_ERROR_THROTTLE(5.0, "triangulation: image %ux%u does not match camera_info %dx%d: frame dropped",
                          image->width, image->height, map->camera().width, map->camera().height);
