@@ -16,6 +16,8 @@ struct TriangleMesh {
   void transform(const Eigen::Isometry3d& T);
   Eigen::AlignedBox3f bounds() const;
   double area() const;
+  /// Area-weighted centroid of the surface (exact; zero for a mesh without area).
+  Eigen::Vector3d surfaceCentroid() const;
 };
 
 /// Loads a PLY or STL file (chosen by extension, then by content). `scale` multiplies every

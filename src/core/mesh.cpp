@@ -39,6 +39,19 @@ double TriangleMesh::area() const {
   return a;
 }
 
+Eigen::Vector3d TriangleMesh::surfaceCentroid() const {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double total = 0;
+  for (const auto& f : faces) {
+    const Eigen::Vector3d a = vertices[f[0]].cast<double>(), b = vertices[f[1]].cast<double>(),
+                          c = vertices[f[2]].cast<double>();
+    const double w = 0.5 * (b - a).cross(c - a).norm();
+    sum += w * (a + b + c) / 3.0;
+    total += w;
+  }
+  return total > 0 ? Eigen::Vector3d(sum / total) : Eigen::Vector3d::Zero();
+}
+
 namespace {
 
 std::string lower(std::string s) {
