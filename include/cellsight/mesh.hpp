@@ -20,6 +20,11 @@ struct TriangleMesh {
   Eigen::Vector3d surfaceCentroid() const;
 };
 
+/// Closest point of triangle (a, b, c) to p (Voronoi regions; Ericson, Real-Time Collision
+/// Detection §5.1.5).
+Eigen::Vector3d closestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                       const Eigen::Vector3d& c);
+
 /// Loads a PLY or STL file (chosen by extension, then by content). `scale` multiplies every
 /// coordinate (e.g. 0.001 for meshes in millimetres). Throws ConfigError naming the file.
 TriangleMesh loadMesh(const std::string& path, double scale = 1.0);

@@ -47,6 +47,11 @@ struct MatchingConfig {
   /// (flanged shaft 0.47 → 0.15 mm, housing 0.85 mm / 0.98° → 0.64 mm / 0.32°).
   int icp_exact_iterations = 6;
   double icp_huber_floor = 0.0005;  ///< m; smallest Huber scale of the ICP residuals
+  /// The exact polish measures to the closest point of the model's mesh (Embree point query):
+  /// scan points beyond a face's edge are pulled back over it. false: to the nearest fine
+  /// sample's tangent plane, which runs on past the edge (measured worse on the demo scan, see
+  /// docs/localization.md). Cloud models always use the samples.
+  bool icp_mesh_polish = true;
   double fitness_radius = 0.002;   ///< m, r_F
   double min_fitness = 0.35;       ///< share of the model's visible points matched (laser shadows hide some)
   double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)

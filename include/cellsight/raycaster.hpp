@@ -17,6 +17,14 @@ struct RayHit {
   Eigen::Vector3f normal = Eigen::Vector3f::Zero();  ///< unit outward normal of the triangle
 };
 
+struct ClosestPoint {
+  bool found = false;
+  Eigen::Vector3f point = Eigen::Vector3f::Zero();   ///< on the surface
+  Eigen::Vector3f normal = Eigen::Vector3f::Zero();  ///< unit outward normal of its triangle
+  float distance = std::numeric_limits<float>::infinity();
+  int geometry = -1, triangle = -1;
+};
+
 class RayCaster {
  public:
   RayCaster();
@@ -35,6 +43,9 @@ class RayCaster {
   /// True if anything lies on the segment (t_near, t_far).
   bool occluded(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir, float t_near,
                 float t_far) const;
+  /// Closest point of all meshes to p within max_distance (Embree point query over the BVH);
+  /// found = false when nothing lies that close.
+  ClosestPoint closestPoint(const Eigen::Vector3f& p, float max_distance) const;
 
  private:
   struct Impl;

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <pcl/features/fpfh.h>
+#include <pcl/filters/uniform_sampling.h>
 #include <pcl/filters/voxel_grid.h>
 #include <pcl/point_types.h>
 #include <pcl/search/kdtree.h>
@@ -53,11 +54,14 @@ ScanCloud sampleMesh(const TriangleMesh& mesh, double spacing, uint64_t seed) {
     q.normal_z = nrm.z();
     dense->push_back(q);
   }
-  pcl::VoxelGrid<pcl::PointNormal> vg;
-  vg.setInputCloud(dense);
-  vg.setLeafSize(static_cast<float>(spacing), static_cast<float>(spacing), static_cast<float>(spacing));
+  // One sample per cell: the dense sample nearest the cell's centre (PCL UniformSampling), so
+  // every point lies on the surface with its face's normal. Cell centroids (VoxelGrid) sit
+  // inside the solid at edges with blended normals, and edges are what fixes a part's pose.
+  pcl::UniformSampling<pcl::PointNormal> us;
+  us.setInputCloud(dense);
+  us.setRadiusSearch(spacing);
   pcl::PointCloud<pcl::PointNormal> thin;
-  vg.filter(thin);
+  us.filter(thin);
   ScanCloud out;
   out.frame_id = "model";
   for (const auto& q : thin) {

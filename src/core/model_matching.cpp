@@ -614,6 +614,21 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
       const Vec3& p = s.icp_points[pi];
       const Eigen::Vector3d q = X * p.cast<double>();
       int j;
+      if (exact && m.has_mesh && cfg.icp_mesh_polish) {
+        // exact: the closest point of the mesh itself. A scan point beyond a face's edge is
+        // pulled back over the edge; against the nearest sample's tangent plane it would not
+        // be (the plane runs on past the edge), and a flat part could slide.
+        const ClosestPoint c = m.caster.closestPoint(q.cast<float>(), static_cast<float>(dmax));
+        if (!c.found) continue;
+        const Eigen::Vector3d cp = c.point.cast<double>(), nf = c.normal.cast<double>(), dv = q - cp;
+        const double dist = dv.norm();
+        if (dist < 1e-9 || std::abs(nf.dot(dv)) >= 0.999 * dist) {
+          rows.push_back({q, nf, nf.dot(dv)});  // over the face: point-to-plane
+        } else {
+          rows.push_back({q, dv / dist, dist});  // beyond an edge or corner: toward it
+        }
+        continue;
+      }
       if (exact) {
         pcl::PointXYZ qq(static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()));
         if (m.fine_tree.nearestKSearch(qq, 1, idx, d2) < 1) continue;
@@ -1138,6 +1153,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("max_cluster_points", c.max_cluster_points);
   c.icp_exact_iterations = m.getInt("icp_exact_iterations", c.icp_exact_iterations);
   if (c.icp_exact_iterations < 0) m.fail("icp_exact_iterations", "must be >= 0");
+  c.icp_mesh_polish = m.getBool("icp_mesh_polish", c.icp_mesh_polish);
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
   if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");
   positive("fitness_radius", c.fitness_radius);

@@ -14,6 +14,8 @@ struct RayCaster::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
   std::vector<std::vector<Eigen::Vector3f>> normals;  // per geometry, per triangle
+  std::vector<std::vector<Eigen::Vector3f>> vertices;  // per geometry, world frame
+  std::vector<std::vector<Eigen::Vector3i>> faces;     // per geometry
   bool committed = false;
 };
 
@@ -65,6 +67,8 @@ int RayCaster::addMesh(const TriangleMesh& mesh, const Eigen::Isometry3d& T) {
   rtcReleaseGeometry(geom);
   if (id != impl_->normals.size()) throw std::logic_error("RayCaster: unexpected geometry id");
   impl_->normals.push_back(std::move(normals));
+  impl_->vertices.push_back(std::move(world));
+  impl_->faces.push_back(mesh.faces);
   return static_cast<int>(id);
 }
 
@@ -132,6 +136,44 @@ bool RayCaster::occluded(const Eigen::Vector3f& o, const Eigen::Vector3f& d, flo
   ray.time = 0;
   rtcOccluded1(impl_->scene, &ctx, &ray);
   return ray.tfar < 0;  // Embree sets tfar = -inf on a hit
+}
+
+ClosestPoint RayCaster::closestPoint(const Eigen::Vector3f& p, float max_distance) const {
+  struct PointQueryState {
+    const Impl* impl;
+    Eigen::Vector3d p;
+    ClosestPoint best;
+  };
+  PointQueryState st{impl_.get(), p.cast<double>(), ClosestPoint()};
+  if (!p.allFinite() || !(max_distance > 0) || !impl_->committed) return st.best;
+  RTCPointQuery q;
+  q.x = p.x();
+  q.y = p.y();
+  q.z = p.z();
+  q.time = 0.f;
+  q.radius = max_distance;
+  RTCPointQueryContext ctx;
+  rtcInitPointQueryContext(&ctx);
+  // called for every triangle whose bounds the (shrinking) query sphere touches
+  auto visit = [](RTCPointQueryFunctionArguments* args) -> bool {
+    auto* st = static_cast<PointQueryState*>(args->userPtr);
+    const auto& f = st->impl->faces[args->geomID][args->primID];
+    const auto& v = st->impl->vertices[args->geomID];
+    const Eigen::Vector3d c =
+        closestPointOnTriangle(st->p, v[f[0]].cast<double>(), v[f[1]].cast<double>(), v[f[2]].cast<double>());
+    const float d = static_cast<float>((c - st->p).norm());
+    if (d >= args->query->radius) return false;
+    args->query->radius = d;
+    st->best.found = true;
+    st->best.point = c.cast<float>();
+    st->best.distance = d;
+    st->best.geometry = static_cast<int>(args->geomID);
+    st->best.triangle = static_cast<int>(args->primID);
+    st->best.normal = st->impl->normals[args->geomID][args->primID];
+    return true;  // the radius shrank
+  };
+  rtcPointQuery(impl_->scene, &q, &ctx, visit, &st);
+  return st.best;
 }
 
 }  // namespace cellsight

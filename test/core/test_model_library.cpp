@@ -18,6 +18,27 @@ TEST(ModelLibrary, SampledCloudsHaveTheResolutionAndOutwardNormals) {
   EXPECT_THROW(sampleMesh(makeBox({1, 1, 1}), 0.0), std::invalid_argument);
 }
 
+// Samples are points of the surface with their face's normal (cell centroids would sit inside
+// the solid at every edge, with blended normals).
+TEST(ModelLibrary, SamplesLieOnTheSurface) {
+  const TriangleMesh box = makeBox({0.04, 0.03, 0.02});
+  const ScanCloud c = sampleMesh(box, 0.001, 3);
+  size_t on_edge_band = 0;
+  for (size_t i = 0; i < c.size(); ++i) {
+    const Eigen::Vector3f p = c.points[i], a = p.cwiseAbs();
+    const Eigen::Vector3f half(0.02f, 0.015f, 0.01f);
+    const float off = (a - half).maxCoeff();  // 0 on the box's surface, < 0 inside
+    EXPECT_NEAR(off, 0.f, 1e-6f) << i;
+    // the normal is the axis of a face the point lies on
+    int axis;
+    c.normals[i].cwiseAbs().maxCoeff(&axis);
+    EXPECT_NEAR(std::abs(c.normals[i][axis]), 1.f, 1e-5f) << i;
+    EXPECT_NEAR(a[axis], half[axis], 1e-6f) << i;
+    on_edge_band += ((half - a).array() < 0.0005f).count() >= 2;
+  }
+  EXPECT_GT(on_edge_band, 50u);  // edges are sampled too
+}
+
 TEST(ModelLibrary, ShippedModelsLoadCacheAndDescribe) {
   const ModelLibrary lib(std::string(CELLSIGHT_SOURCE_DIR) + "/config/models");
   EXPECT_GE(lib.ids().size(), 6u);

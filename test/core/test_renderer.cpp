@@ -2,6 +2,10 @@
 
 #include <opencv2/core.hpp>
 
+#include <random>
+
+#include "cellsight/evaluation.hpp"
+#include "cellsight/mesh.hpp"
 #include "cellsight/raycaster.hpp"
 #include "cellsight/renderer.hpp"
 #include "test_helpers.hpp"
@@ -30,6 +34,45 @@ TEST(RayCaster, HitsTheRightTriangle) {
   EXPECT_FALSE(rc.intersect({0.5, 0, 1}, {0, 0, -1}).hit);
   EXPECT_TRUE(rc.occluded({-1, 0, 0}, {1, 0, 0}, 0, 2));
   EXPECT_FALSE(rc.occluded({-1, 0, 0}, {1, 0, 0}, 0, 0.9));
+}
+
+// The point query against every triangle by brute force, on a shipped part (a U-profile with
+// inner corners) and two placed boxes; beyond max_distance nothing is found.
+TEST(RayCaster, ClosestPointMatchesBruteForce) {
+  const TriangleMesh u = loadMesh(std::string(CELLSIGHT_SOURCE_DIR) + "/config/models/holder/mesh.ply");
+  RayCaster rc;
+  rc.addMesh(u, Eigen::Isometry3d::Identity());
+  rc.addMesh(makeBox({0.01, 0.01, 0.01}), Eigen::Isometry3d(Eigen::Translation3d(0.05, 0, 0)));
+  rc.commit();
+  std::vector<Eigen::Vector3d> a, b, c;
+  for (const auto& f : u.faces) {
+    a.push_back(u.vertices[f[0]].cast<double>());
+    b.push_back(u.vertices[f[1]].cast<double>());
+    c.push_back(u.vertices[f[2]].cast<double>());
+  }
+  const TriangleMesh box = makeBox({0.01, 0.01, 0.01});
+  for (const auto& f : box.faces) {
+    const Eigen::Vector3d o(0.05, 0, 0);
+    a.push_back(o + box.vertices[f[0]].cast<double>());
+    b.push_back(o + box.vertices[f[1]].cast<double>());
+    c.push_back(o + box.vertices[f[2]].cast<double>());
+  }
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> U(-0.035f, 0.06f);
+  int found = 0;
+  for (int i = 0; i < 3000; ++i) {
+    const Eigen::Vector3f p(U(rng), U(rng) * 0.6f, U(rng) * 0.7f);
+    double best = 1e9;
+    for (size_t k = 0; k < a.size(); ++k) best = std::min(best, pointTriangleDistance(p.cast<double>(), a[k], b[k], c[k]));
+    const ClosestPoint cp = rc.closestPoint(p, 0.004f);
+    ASSERT_EQ(cp.found, best < 0.004) << i;
+    if (!cp.found) continue;
+    ++found;
+    EXPECT_NEAR(cp.distance, best, 1e-6);
+    EXPECT_NEAR((cp.point - p).norm(), best, 1e-6);
+    EXPECT_NEAR(cp.normal.norm(), 1.0, 1e-5);
+  }
+  EXPECT_GT(found, 300);
 }
 
 TEST(LightSheet, PlaneIsTheLaserFramesXZPlane) {
