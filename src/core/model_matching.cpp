@@ -597,6 +597,8 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
   const int exact_iterations = cfg.icp_exact_iterations;
   double rmse = 0;
   int exact_done = 0;
+  // eigenvalues below this share of the largest are taken as unconstrained directions
+  const double degenerate_ratio = 1e-6;
   std::vector<int> idx(1);
   std::vector<float> d2(1);
   std::vector<double> res;
@@ -660,7 +662,23 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
       ss += row.r * row.r;
     }
     rmse = std::sqrt(ss / rows.size());
-    const Eigen::Matrix<double, 6, 1> x = A.ldlt().solve(b);
+    // Degeneracy-aware step: directions the data do not constrain (a U-profile seen from
+    // above says nothing along its extrusion; exact face normals make that exactly singular)
+    // get no step instead of an arbitrary one. Rotation is scaled by the part's size so that
+    // the eigenvalues compare like with like.
+    const double L = std::max(0.5 * static_cast<double>(m.diameter), 1e-3);
+    Eigen::Matrix<double, 6, 1> scale;
+    scale << L, L, L, 1, 1, 1;
+    const Eigen::Matrix<double, 6, 6> As = scale.asDiagonal().inverse() * A * scale.asDiagonal().inverse();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(As);
+    const double floor_ev = degenerate_ratio * eig.eigenvalues().maxCoeff();
+    Eigen::Matrix<double, 6, 1> xs = Eigen::Matrix<double, 6, 1>::Zero();
+    const Eigen::Matrix<double, 6, 1> bs = scale.asDiagonal().inverse() * b;
+    for (int k = 0; k < 6; ++k) {
+      const double ev = eig.eigenvalues()[k];
+      if (ev > floor_ev && ev > 0) xs += eig.eigenvectors().col(k) * (eig.eigenvectors().col(k).dot(bs) / ev);
+    }
+    const Eigen::Matrix<double, 6, 1> x = scale.asDiagonal().inverse() * xs;
     if (!x.allFinite()) break;
     Eigen::Isometry3d D = Eigen::Isometry3d::Identity();
     const double angle = x.head<3>().norm();
