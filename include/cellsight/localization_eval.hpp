@@ -11,7 +11,8 @@ namespace cellsight {
 
 /// Points of `mesh` placed at T (model → scene) that `viewpoint` sees (facing it within
 /// `max_view_angle`, not hidden by the mesh itself), about `spacing` apart, with Gaussian noise
-/// of `noise` m along the view ray; normals from the mesh.
+/// of `noise` m along the view ray; normals from the mesh. One point per `spacing` cell is the
+/// cell's centroid, as the clustering's voxel grid gives the matcher.
 ScanCloud singleViewCloud(const TriangleMesh& mesh, const Eigen::Isometry3d& T, const Eigen::Vector3f& viewpoint,
                           double spacing, double noise, uint64_t seed, double max_view_angle = 1.40);
 

@@ -16,9 +16,16 @@ namespace cellsight {
 
 using Fpfh = std::array<float, 33>;
 
+/// How sampleMesh keeps one point per cell.
+enum class CellSample {
+  kSurfacePoint,  ///< the sample nearest the cell centre: on the surface, its face's normal (models)
+  kCentroid,      ///< the cell's centroid and mean normal, as a voxel-grid filter of a scan gives
+};
+
 /// Area-weighted random samples on the mesh (seeded), thinned to one per `spacing` voxel;
 /// normals are the outward face normals.
-ScanCloud sampleMesh(const TriangleMesh& mesh, double spacing, uint64_t seed = 1);
+ScanCloud sampleMesh(const TriangleMesh& mesh, double spacing, uint64_t seed = 1,
+                     CellSample keep = CellSample::kSurfacePoint);
 
 /// FPFH (PCL) for every point of a cloud with normals, support radius in metres.
 std::vector<Fpfh> computeFpfh(const ScanCloud& cloud_with_normals, double radius);

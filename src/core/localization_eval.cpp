@@ -13,7 +13,8 @@ namespace cellsight {
 
 ScanCloud singleViewCloud(const TriangleMesh& mesh, const Eigen::Isometry3d& T, const Eigen::Vector3f& viewpoint,
                           double spacing, double noise, uint64_t seed, double max_view_angle) {
-  const ScanCloud model = sampleMesh(mesh, spacing, seed);
+  // cell centroids: the clustering node hands the matcher a 1 mm voxel grid of the scan
+  const ScanCloud model = sampleMesh(mesh, spacing, seed, CellSample::kCentroid);
   RayCaster rc;
   rc.addMesh(mesh, T);
   rc.commit();

@@ -19,7 +19,7 @@
 
 namespace cellsight {
 
-ScanCloud sampleMesh(const TriangleMesh& mesh, double spacing, uint64_t seed) {
+ScanCloud sampleMesh(const TriangleMesh& mesh, double spacing, uint64_t seed, CellSample keep) {
   if (!(spacing > 0)) throw std::invalid_argument("sampleMesh: spacing must be > 0");
   // Cumulative areas for area-weighted face choice; enough samples for ~4 per voxel face.
   std::vector<double> cum;
@@ -54,14 +54,24 @@ ScanCloud sampleMesh(const TriangleMesh& mesh, double spacing, uint64_t seed) {
     q.normal_z = nrm.z();
     dense->push_back(q);
   }
-  // One sample per cell: the dense sample nearest the cell's centre (PCL UniformSampling), so
-  // every point lies on the surface with its face's normal. Cell centroids (VoxelGrid) sit
-  // inside the solid at edges with blended normals, and edges are what fixes a part's pose.
-  pcl::UniformSampling<pcl::PointNormal> us;
-  us.setInputCloud(dense);
-  us.setRadiusSearch(spacing);
+  // One sample per cell. Models keep the dense sample nearest the cell's centre (PCL
+  // UniformSampling): every point lies on the surface with its face's normal. Cell centroids
+  // (VoxelGrid) sit inside the solid at edges with blended normals, and edges are what fixes a
+  // part's pose; they are what the clustering's voxel grid makes of a scan, though, so the
+  // simulated single views keep them.
   pcl::PointCloud<pcl::PointNormal> thin;
-  us.filter(thin);
+  const float leaf = static_cast<float>(spacing);
+  if (keep == CellSample::kCentroid) {
+    pcl::VoxelGrid<pcl::PointNormal> vg;
+    vg.setInputCloud(dense);
+    vg.setLeafSize(leaf, leaf, leaf);
+    vg.filter(thin);
+  } else {
+    pcl::UniformSampling<pcl::PointNormal> us;
+    us.setInputCloud(dense);
+    us.setRadiusSearch(spacing);
+    us.filter(thin);
+  }
   ScanCloud out;
   out.frame_id = "model";
   for (const auto& q : thin) {
