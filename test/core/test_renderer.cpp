@@ -73,6 +73,19 @@ TEST(RayCaster, ClosestPointMatchesBruteForce) {
     EXPECT_NEAR(cp.normal.norm(), 1.0, 1e-5);
   }
   EXPECT_GT(found, 300);
+  // and independently of the triangle routine both share: a box's distance in closed form
+  RayCaster box_only;
+  box_only.addMesh(makeBox({0.02, 0.01, 0.03}), Eigen::Isometry3d(Eigen::Translation3d(0.1, 0.2, 0.3)));
+  box_only.commit();
+  const Eigen::Vector3f centre(0.1f, 0.2f, 0.3f), half(0.01f, 0.005f, 0.015f);
+  for (int i = 0; i < 2000; ++i) {
+    const Eigen::Vector3f p = centre + Eigen::Vector3f(U(rng), U(rng), U(rng)) * 0.4f;
+    const Eigen::Vector3f a = (p - centre).cwiseAbs() - half;
+    const float exact = a.maxCoeff() > 0 ? a.cwiseMax(0.f).norm() : -a.maxCoeff();  // outside / inside
+    const ClosestPoint cp = box_only.closestPoint(p, 1.f);
+    ASSERT_TRUE(cp.found);
+    EXPECT_NEAR(cp.distance, exact, 1e-6f) << p.transpose();
+  }
 }
 
 TEST(LightSheet, PlaneIsTheLaserFramesXZPlane) {
