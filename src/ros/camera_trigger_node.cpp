@@ -126,6 +126,15 @@ class CameraTrigger {
       return;
     }
     if (!move_client_.isValid()) move_client_ = nh_.serviceClient<cellsight::MoveFlange>("robot/move_flange", true);
+    // The first frame is lost if the camera's connection to us is not up yet when the robot
+    // reaches the first pose (the camera driver and the robot start together; seen in CI as
+    // "no image within 3 s" on frame 0): wait for it, briefly.
+    const ros::WallTime connect_deadline = ros::WallTime::now() + ros::WallDuration(5.0);
+    while (image_sub_.getNumPublishers() == 0 && ros::ok() && ros::WallTime::now() < connect_deadline)
+      ros::WallDuration(0.02).sleep();
+    if (image_sub_.getNumPublishers() == 0)
+      ROS_WARN("camera_trigger: no camera connected on %s after 5 s; scanning anyway (frames will time out "
+               "if it never comes)", image_sub_.getTopic().c_str());
     const bool processing = reset_client_.waitForExistence(ros::Duration(3.0)) && finish_client_.exists();
     if (processing) {
       std_srvs::Trigger t;
