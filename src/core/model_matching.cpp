@@ -22,6 +22,8 @@
 
 #include "cellsight/errors.hpp"
 #include "cellsight/fgr.hpp"
+#include "cellsight/point_grid.hpp"
+#include "cellsight/closest_point_grid.hpp"
 #include "cellsight/raycaster.hpp"
 #include "cellsight/yaml_reader.hpp"
 
@@ -142,8 +144,8 @@ struct PpfTable {
   int angle_bins = 30;
   AngleBins angles;  // bins of angle_bins, shared by the model table and the scene's keys
   struct Entry {
-    int32_t ref;
-    float alpha;
+    int32_t cell;   // first accumulator cell of the reference point: ref × angle_bins
+    float alpha;    // α_m in bins: (α_m + π) · angle_bins / 2π, in [0, angle_bins)
   };
   std::vector<Entry> entries;    // sorted by key
   std::vector<uint32_t> offset;  // entries of key k: [offset[k], offset[k + 1]) (dense: O(1) lookup)
@@ -212,7 +214,8 @@ PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins) {
     for (size_t j = 0; j < c.size(); ++j) {
       uint64_t key;
       if (i == j || !ppfKey(c.points[i], c.normals[i], c.points[j], c.normals[j], dist_step, t.angles, &key)) continue;
-      all.push_back({key, {static_cast<int32_t>(i), pairAlpha(L, c.points[j])}});
+      const float alpha_bins = (pairAlpha(L, c.points[j]) + static_cast<float>(M_PI)) * bins / static_cast<float>(2 * M_PI);
+      all.push_back({key, {static_cast<int32_t>(i) * bins, std::min(alpha_bins, std::nextafter(static_cast<float>(bins), 0.f))}});
     }
   }
   std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
@@ -254,6 +257,7 @@ struct ModelMatcher::ModelIndex {
   ScanCloud ppf_cloud;  // coarse cloud thinned to ppf_sampling
   PpfTable ppf;         // its point pair features (Drost et al. 2010)
   RayCaster caster;  // the mesh in the model frame (self-occlusion)
+  ClosestPointGrid closest;  // candidate triangles per cell for the polish (empty: Embree only)
   bool has_mesh = true;  // false for a cloud model: visibility from the normals only
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   float diameter = 0;
@@ -272,7 +276,8 @@ struct SceneData {
   pcl::KdTreeFLANN<pcl::FPFHSignature33> fpfh_tree;
   ScanCloud ppf;               // coarse thinned to ppf_sampling
   std::vector<Vec3> icp_points;
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;  // over `all`
+  PointGrid grid;                        // over `all` (scene_search: grid)
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree;  // over `all` (scene_search: kdtree)
   float diameter = 0;  // lower bound of the largest point distance
 };
 
@@ -286,26 +291,38 @@ std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const M
   vg.setLeafSize(leaf, leaf, leaf);
   pcl::PointCloud<pcl::PointXYZ>::Ptr coarse(new pcl::PointCloud<pcl::PointXYZ>);
   vg.filter(*coarse);
-  pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
-  ne.setInputCloud(coarse);
-  ne.setSearchSurface(all);
-  ne.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
-  ne.setRadiusSearch(cfg.normal_radius);
-  ne.setViewPoint(cfg.viewpoint.x(), cfg.viewpoint.y(), cfg.viewpoint.z());
-  pcl::PointCloud<pcl::Normal> normals;
-  ne.compute(normals);
+  std::vector<Vec3> normals(coarse->size());
+  if (cfg.scene_search == "grid") {
+    // one grid serves the normals (radius normal_radius) and the fitness test (r_F)
+    s->grid = PointGrid(finite, static_cast<float>(std::max(cfg.normal_radius, cfg.fitness_radius)));
+    std::vector<Vec3> q(coarse->size());
+    for (size_t i = 0; i < q.size(); ++i) q[i] = (*coarse)[i].getVector3fMap();
+    normals = gridNormals(s->grid, q, static_cast<float>(cfg.normal_radius), cfg.viewpoint);
+  } else {
+    pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+    ne.setInputCloud(coarse);
+    ne.setSearchSurface(all);
+    ne.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+    ne.setRadiusSearch(cfg.normal_radius);
+    ne.setViewPoint(cfg.viewpoint.x(), cfg.viewpoint.y(), cfg.viewpoint.z());
+    pcl::PointCloud<pcl::Normal> n;
+    ne.compute(n);
+    for (size_t i = 0; i < n.size(); ++i) normals[i] = n[i].getNormalVector3fMap();
+    s->tree.setInputCloud(all);
+  }
   pcl::PointCloud<pcl::PointXYZ>::Ptr kept(new pcl::PointCloud<pcl::PointXYZ>);
   pcl::PointCloud<pcl::Normal>::Ptr kept_n(new pcl::PointCloud<pcl::Normal>);
   for (size_t i = 0; i < coarse->size(); ++i) {
-    if (!std::isfinite(normals[i].normal_x)) continue;
+    if (!normals[i].allFinite()) continue;
     kept->push_back((*coarse)[i]);
-    kept_n->push_back(normals[i]);
+    pcl::Normal n;
+    n.getNormalVector3fMap() = normals[i];
+    kept_n->push_back(n);
     s->coarse.append((*coarse)[i].getVector3fMap(), 0.f);
-    s->coarse.normals.push_back(normals[i].getNormalVector3fMap().normalized());
+    s->coarse.normals.push_back(normals[i].normalized());
   }
   if (kept->empty()) return s;
   s->ppf = thinned(s->coarse, cfg.ppf_sampling);
-  s->tree.setInputCloud(all);
   const size_t cap = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
   const size_t step = std::max<size_t>(1, (finite.size() + cap - 1) / cap);
   for (size_t i = 0; i < finite.size(); i += step) s->icp_points.push_back(finite[i]);
@@ -515,32 +532,41 @@ std::vector<Hypothesis> ppfVoting(const ScanCloud& scene, const ModelMatcher::Mo
     std::fill(acc.begin(), acc.end(), 0);
     const Vec3 &pr = scene.points[r], &nr = scene.normals[r];
     const Eigen::Isometry3f Ls = toLocalFrame(pr, nr);
+    // the running maximum (lowest cell on ties, as a scan would find it) instead of a scan
+    // of the M × bins accumulator per reference
+    int best = 0;
+    size_t best_k = 0;
     for (size_t i = 0; i < scene.size(); ++i) {
       if (i == r || (scene.points[i] - pr).squaredNorm() > max_d2) continue;
       uint64_t key;
       if (!ppfKey(pr, nr, scene.points[i], scene.normals[i], t.dist_step, t.angles, &key)) continue;
       const auto [lo, hi] = t.range(key);
       if (lo == hi) continue;
-      const float alpha_s = pairAlpha(Ls, scene.points[i]);
+      // rotation bin of α_m − α_s, wrapped into [0, bins): entries carry α_m in bins already
+      const float as = pairAlpha(Ls, scene.points[i]) * to_bin - static_cast<float>(bins);
       for (size_t e = lo; e < hi; ++e) {
-        float a = t.entries[e].alpha - alpha_s;
-        if (a < -M_PI) a += static_cast<float>(2 * M_PI);
-        if (a >= M_PI) a -= static_cast<float>(2 * M_PI);
-        const int b = std::min(bins - 1, static_cast<int>((a + static_cast<float>(M_PI)) * to_bin));
-        ++acc[static_cast<size_t>(t.entries[e].ref) * bins + b];
+        int b = static_cast<int>(t.entries[e].alpha - as);  // in [bins/2, 5 bins/2)
+        if (b >= bins) b -= bins;
+        if (b >= bins) b -= bins;
+        const size_t k = static_cast<size_t>(t.entries[e].cell) + static_cast<size_t>(b);
+        const int v = ++acc[k];
+        if (v > best || (v == best && k < best_k)) {
+          best = v;
+          best_k = k;
+        }
       }
     }
-    const auto best = std::max_element(acc.begin(), acc.end());
-    if (*best < 3) continue;
-    const size_t k = static_cast<size_t>(best - acc.begin());
+    if (best < 3) continue;
+    const size_t k = best_k;
     const int mr = static_cast<int>(k / bins);
     const float alpha = (static_cast<float>(k % bins) + 0.5f) / to_bin - static_cast<float>(M_PI);
     const Eigen::Isometry3f Lm = toLocalFrame(m.ppf_cloud.points[mr], m.ppf_cloud.normals[mr]);
     Hypothesis h;
     h.T = Ls.inverse() * Eigen::AngleAxisf(alpha, Vec3::UnitX()) * Lm;
-    h.score = *best;
+    h.score = best;
     out.push_back(h);
   }
+
   return out;
 }
 
@@ -620,7 +646,10 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
         // exact: the closest point of the mesh itself. A scan point beyond a face's edge is
         // pulled back over the edge; against the nearest sample's tangent plane it would not
         // be (the plane runs on past the edge), and a flat part could slide.
-        const ClosestPoint c = m.caster.closestPoint(q.cast<float>(), static_cast<float>(dmax));
+        bool covered = false;
+        ClosestPoint c;
+        if (!m.closest.empty()) c = m.closest.closestPoint(q.cast<float>(), static_cast<float>(dmax), &covered);
+        if (!covered && !(m.closest.margin() >= dmax)) c = m.caster.closestPoint(q.cast<float>(), static_cast<float>(dmax));
         if (!c.found) continue;
         const Eigen::Vector3d cp = c.point.cast<double>(), nf = c.normal.cast<double>(), dv = q - cp;
         const double dist = dv.norm();
@@ -652,9 +681,10 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     // hundredths of a millimetre, and a smaller scale would damp the few points on side walls
     // and edges — the only ones that fix a flat part's in-plane position — to a crawl.
     const double huber = std::max(1.5 * sigma, cfg.icp_huber_floor);
-    double ss = 0;
+    double ss = 0, wsum = 0;
     for (const auto& row : rows) {
       const double w = std::abs(row.r) <= huber ? 1.0 : huber / std::abs(row.r);
+      wsum += w;
       Eigen::Matrix<double, 6, 1> J;
       J << row.q.cross(row.n), row.n;
       A += w * J * J.transpose();
@@ -689,7 +719,11 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     // converged: the field's correspondences are good to its cell, so stop them at 10 µm steps;
     // the exact polish stops at 1 µm
     const double tol = exact ? 1e-6 : 1e-5;
-    const bool small = angle < 10 * tol && x.tail<3>().norm() < tol;
+    // small: the step moves the points by less than tol, measured along their normals (RMS,
+    // weighted) — a direction the data hardly constrain (the shaft's turn about its axis) may
+    // still drift without changing the fit, and must not keep the loop going
+    const double moved = std::sqrt(std::max(0.0, x.dot(A * x)) / std::max(wsum, 1e-12));
+    const bool small = (angle < 10 * tol && x.tail<3>().norm() < tol) || (!exact && moved < tol);
     if (exact) {
       if (++exact_done >= exact_iterations || small) break;
     } else if (small) {
@@ -741,7 +775,11 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     }
     ++visible;
     const Vec3 p = T * mp[i];
-    if (s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2) ++matched;
+    if (cfg.scene_search == "grid") {
+      matched += s.grid.anyWithin(p, static_cast<float>(cfg.fitness_radius));
+    } else if (s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2) {
+      ++matched;
+    }
   }
   return visible ? static_cast<double>(matched) / visible : 0.0;
 }
@@ -792,7 +830,9 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   double best = -1;
   // Every candidate is refined on a thinned scene (distance-field neighbours only) and scored;
   // the best one is then refined on all the ICP points and polished with exact neighbours.
-  auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, PartDetection* c) {
+  // `bound`: the score to beat. The fitness (ray casts, neighbour queries) is skipped when the
+  // coverage alone cannot beat it: score = fitness × coverage with fitness <= 1.
+  auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, double bound, PartDetection* c) {
     const Refined r = icp(s, m, T0, cfg, points, polish);
     if (!r.T.matrix().allFinite()) return false;
     if (support && belowSupport(m, r.T, *support) > cfg.max_support_penetration) return false;
@@ -800,6 +840,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
     c->pose = r.T.cast<double>();
     c->rmse = r.rmse;
     c->coverage = coverage(s, m, r.T, cfg.fitness_radius);
+    if (cfg.min_coverage > 0 && c->coverage <= bound) return false;
     c->fitness = visibleFitness(s, m, r.T, cfg);
     c->score = c->fitness * (cfg.min_coverage > 0 ? c->coverage : 1.0);
     return true;
@@ -810,7 +851,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   for (const auto& h : candidates) {
     if (!h.T.matrix().allFinite()) continue;
     PartDetection c;
-    if (evaluate(h.T, screen_points, false, &c) && c.score > best) {
+    if (evaluate(h.T, screen_points, false, best, &c) && c.score > best) {
       best = c.score;
       chosen = c;
     }
@@ -818,7 +859,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   PartDetection fine;
   if (best < 0) {
     fine = d;
-  } else if (!evaluate(chosen.pose.cast<float>(), all_points, true, &fine)) {
+  } else if (!evaluate(chosen.pose.cast<float>(), all_points, true, -1.0, &fine)) {
     fine = chosen;
   }
   fine.refine_seconds = seconds(t_refine);
@@ -907,6 +948,9 @@ ModelMatcher::ModelMatcher(std::shared_ptr<const ModelLibrary> library, const Ma
   if (!library_) throw std::invalid_argument("ModelMatcher: no model library");
   if (config_.coarse != "ppf" && config_.coarse != "ransac" && config_.coarse != "fgr") {
     throw std::invalid_argument("ModelMatcher: coarse must be 'ppf', 'ransac' or 'fgr' (got '" + config_.coarse + "')");
+  }
+  if (config_.scene_search != "grid" && config_.scene_search != "kdtree") {
+    throw std::invalid_argument("ModelMatcher: scene_search must be 'grid' or 'kdtree' (got '" + config_.scene_search + "')");
   }
   if (config_.threads <= 0) config_.threads = std::max(1u, std::thread::hardware_concurrency());
 }
@@ -1006,6 +1050,13 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
   m->has_mesh = !e.mesh.faces.empty();
   if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
   m->caster.commit();
+  if (m->has_mesh && config_.icp_mesh_polish && config_.closest_point_grid && e.mesh.faces.size() <= 5000) {
+    const float dmin = static_cast<float>(std::max(3 * config_.icp_spacing, 0.5 * config_.fitness_radius));
+    const float cell = static_cast<float>(std::max(2 * config_.icp_spacing, 0.001));
+    // margin: the polish's smallest correspondence distance and a cell (farther points are
+    // rare in the polish: the RayCaster answers them)
+    m->closest = ClosestPointGrid(e.mesh, cell, dmin + cell);
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   return indices_.emplace(id, m).first->second;
 }
@@ -1141,6 +1192,8 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
     if (!(v >= 0 && v <= 1)) m.fail(key, "must be in [0, 1]");
   };
   positive("voxel", c.voxel);
+  c.scene_search = m.getString("scene_search", c.scene_search);
+  if (c.scene_search != "grid" && c.scene_search != "kdtree") m.fail("scene_search", "must be grid or kdtree");
   positive("normal_radius", c.normal_radius);
   positive("feature_radius", c.feature_radius);
   c.mutual_filter = m.getBool("mutual_filter", c.mutual_filter);
@@ -1172,6 +1225,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.icp_exact_iterations = m.getInt("icp_exact_iterations", c.icp_exact_iterations);
   if (c.icp_exact_iterations < 0) m.fail("icp_exact_iterations", "must be >= 0");
   c.icp_mesh_polish = m.getBool("icp_mesh_polish", c.icp_mesh_polish);
+  c.closest_point_grid = m.getBool("closest_point_grid", c.closest_point_grid);
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
   if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");
   positive("fitness_radius", c.fitness_radius);
