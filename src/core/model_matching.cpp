@@ -218,7 +218,10 @@ PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins) {
       all.push_back({key, {static_cast<int32_t>(i) * bins, std::min(alpha_bins, std::nextafter(static_cast<float>(bins), 0.f))}});
     }
   }
-  std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  // by key, then by accumulator cell: a key's votes then walk the accumulator forwards
+  std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) {
+    return a.first < b.first || (a.first == b.first && a.second.cell < b.second.cell);
+  });
   // Features shared by very many pairs (two points on one large flat face differ only in their
   // distance) say little about the pose and cost most of the voting: leave them out.
   const size_t max_bucket = std::max<size_t>(256, all.size() / 4000);
