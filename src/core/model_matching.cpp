@@ -582,8 +582,14 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   *iterations = static_cast<int>(votes.size());
   std::sort(votes.begin(), votes.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
   if (votes.size() > static_cast<size_t>(cfg.ppf_candidates)) votes.resize(cfg.ppf_candidates);
+  // scene points in a random (fixed) order: a pose whose first `probe` points explain less
+  // than half the best pose's share so far stops there (its score extrapolated)
   std::vector<int> order(s.coarse.size());
   std::iota(order.begin(), order.end(), 0);
+  std::mt19937_64 rng(cfg.seed);
+  std::shuffle(order.begin(), order.end(), rng);
+  const int probe = std::min<int>(64, static_cast<int>(order.size()));
+  int best_score = 0;
   const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
   std::vector<Hypothesis> top;
   const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
@@ -591,7 +597,8 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   const float sunk = static_cast<float>(cfg.max_support_penetration + 2 * cfg.inlier_distance);
   for (auto& v : votes) {
     if (support && belowSupport(m, v.T, *support) > sunk) continue;
-    v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), static_cast<int>(order.size()) + 1, 0.0);
+    v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), probe, 0.5 * best_score / static_cast<double>(order.size()));
+    best_score = std::max(best_score, v.score);
     bool merged = false;
     for (auto& h : top) {
       if (!distinct(h.T, v.T, static_cast<float>(2 * cfg.inlier_distance))) {
@@ -631,6 +638,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
   std::vector<int> idx(1);
   std::vector<float> d2(1);
   std::vector<double> res;
+  Eigen::Matrix<double, 6, 1> prev_step = Eigen::Matrix<double, 6, 1>::Zero();  // scaled
   for (int it = 0; it < cfg.icp_iterations + (polish ? exact_iterations : 0); ++it) {
     const bool exact = it >= cfg.icp_iterations || exact_done > 0;
     Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
@@ -724,9 +732,25 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     const double tol = exact ? 1e-6 : 1e-5;
     // small: the step moves the points by less than tol, measured along their normals (RMS,
     // weighted) — a direction the data hardly constrain (the shaft's turn about its axis) may
-    // still drift without changing the fit, and must not keep the loop going
+    // still drift without changing the fit, and must not keep the loop going. Only when
+    // screening: the final alignment converges fully (a flat part slides slowly along its
+    // weakly constrained direction; stopping it early cost strict occlusion successes)
     const double moved = std::sqrt(std::max(0.0, x.dot(A * x)) / std::max(wsum, 1e-12));
-    const bool small = (angle < 10 * tol && x.tail<3>().norm() < tol) || (!exact && moved < tol);
+    // a turn about an axis of symmetry (or any turn of a sphere about its centre) changes
+    // nothing: it does not count as motion
+    Eigen::Vector3d w = x.head<3>(), v = x.tail<3>();
+    if (m.info.symmetry.type == Symmetry::Type::kAxial) {
+      const Eigen::Vector3d a = m.info.symmetry.axis.normalized();
+      w -= a * a.dot(w);
+    } else if (m.info.symmetry.type == Symmetry::Type::kSpherical) {
+      v += w.cross(m.centroid);
+      w.setZero();
+    }
+    // on the field, a step that turns back on the previous one is its quantisation (nearest
+    // sample per cell) bouncing the pose around the minimum: converged as far as it can tell
+    const bool bounced = !exact && it > 0 && xs.dot(prev_step) < 0;
+    prev_step = xs;
+    const bool small = (w.norm() < 10 * tol && v.norm() < tol) || (!polish && moved < tol) || bounced;
     if (exact) {
       if (++exact_done >= exact_iterations || small) break;
     } else if (small) {
