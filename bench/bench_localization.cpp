@@ -2,7 +2,8 @@
 // in one run, through ours (PPF + distance-field scoring + ICP; and the thesis's FPFH RANSAC),
 // PCL SampleConsensusPrerejective on FPFH, Open3D 0.16 RANSAC and FGR on FPFH, and OpenCV
 // contrib's PPF (ppf_match_3d). Each method runs in its own child process (peak memory from
-// wait4). Scene preprocessing (voxels, normals, features) is inside each method's timed part;
+// wait4). Ours also runs with PCL's normal estimation / FLANN and Embree's point query in place
+// of its own grids (the library paths, for comparison). Scene preprocessing (voxels, normals, features) is inside each method's timed part;
 // model preprocessing (training, model features) is not. Peers that stop at a coarse pose get
 // PCL's ICP (point to point, 30 iterations), as a user gluing libraries would add.
 // Output: JSON (argv[1], default bench_localization.json) + a Markdown table on stdout.
@@ -218,12 +219,16 @@ int main(int argc, char** argv) {
   const std::vector<Case> cases = makeCases(*lib, per_part);
 
   std::vector<std::pair<std::string, Method>> methods;
-  auto ours = [](const std::string& coarse) {
-    return [coarse](const std::shared_ptr<const ModelLibrary>& l) {
+  auto ours = [](const std::string& coarse, bool library_search = false) {
+    return [coarse, library_search](const std::shared_ptr<const ModelLibrary>& l) {
       MatchingConfig cfg = loadMatchingConfig(kRoot + "/config/matching.yaml");
       cfg.viewpoint = kEye;
       cfg.coarse = coarse;
       cfg.threads = 1;
+      if (library_search) {  // PCL normals + FLANN fitness, Embree's point query in the polish
+        cfg.scene_search = "kdtree";
+        cfg.closest_point_grid = false;
+      }
       auto m = std::make_shared<ModelMatcher>(l, cfg);
       m->prepare({"bracket", "housing", "blade", "flanged_shaft", "holder"});
       return std::function<Eigen::Isometry3d(const Case&)>([m](const Case& c) {
@@ -233,6 +238,7 @@ int main(int argc, char** argv) {
     };
   };
   methods.push_back({"cellsight ppf (ours)", ours("ppf")});
+  methods.push_back({"cellsight ppf, library searches (PCL normals + FLANN, Embree point query)", ours("ppf", true)});
   methods.push_back({"cellsight fpfh-ransac (thesis method, ours)", ours("ransac")});
   methods.push_back({"PCL SampleConsensusPrerejective + ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
                        const auto models = allModels(*l);
