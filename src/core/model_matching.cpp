@@ -692,10 +692,9 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     // hundredths of a millimetre, and a smaller scale would damp the few points on side walls
     // and edges — the only ones that fix a flat part's in-plane position — to a crawl.
     const double huber = std::max(1.5 * sigma, cfg.icp_huber_floor);
-    double ss = 0, wsum = 0;
+    double ss = 0;
     for (const auto& row : rows) {
       const double w = std::abs(row.r) <= huber ? 1.0 : huber / std::abs(row.r);
-      wsum += w;
       Eigen::Matrix<double, 6, 1> J;
       J << row.q.cross(row.n), row.n;
       A += w * J * J.transpose();
@@ -730,12 +729,6 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     // converged: the field's correspondences are good to its cell, so stop them at 10 µm steps;
     // the exact polish stops at 1 µm
     const double tol = exact ? 1e-6 : 1e-5;
-    // small: the step moves the points by less than tol, measured along their normals (RMS,
-    // weighted) — a direction the data hardly constrain (the shaft's turn about its axis) may
-    // still drift without changing the fit, and must not keep the loop going. Only when
-    // screening: the final alignment converges fully (a flat part slides slowly along its
-    // weakly constrained direction; stopping it early cost strict occlusion successes)
-    const double moved = std::sqrt(std::max(0.0, x.dot(A * x)) / std::max(wsum, 1e-12));
     // a turn about an axis of symmetry (or any turn of a sphere about its centre) changes
     // nothing: it does not count as motion
     Eigen::Vector3d w = x.head<3>(), v = x.tail<3>();
@@ -750,7 +743,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     // sample per cell) bouncing the pose around the minimum: converged as far as it can tell
     const bool bounced = !exact && it > 0 && xs.dot(prev_step) < 0;
     prev_step = xs;
-    const bool small = (w.norm() < 10 * tol && v.norm() < tol) || (!polish && moved < tol) || bounced;
+    const bool small = (w.norm() < 10 * tol && v.norm() < tol) || bounced;
     if (exact) {
       if (++exact_done >= exact_iterations || small) break;
     } else if (small) {
