@@ -6,6 +6,7 @@
 // of its own grids (the library paths, for comparison). Scene preprocessing (voxels, normals, features) is inside each method's timed part;
 // model preprocessing (training, model features) is not. Peers that stop at a coarse pose get
 // PCL's ICP (point to point, 30 iterations), as a user gluing libraries would add.
+// Each scene runs 3 times and counts its fastest run (success from the first).
 // Output: JSON (argv[1], default bench_localization.json) + a Markdown table on stdout.
 // argv[2]: clouds per part (default 8); argv[3]: run only the methods whose name contains it.
 #include <pcl/features/fpfh.h>
@@ -44,7 +45,8 @@ namespace {
 
 const std::string kRoot = CELLSIGHT_SOURCE_DIR;
 const Eigen::Vector3f kEye(0.52f, 0.f, 0.62f);
-const unsigned kMethodLimitSeconds = 300;
+const unsigned kMethodLimitSeconds = 600;
+const int kRepetitions = 3;  // runs per scene; the fastest is the scene's time
 const double kVoxel = 0.002, kNormal = 0.005, kFeature = 0.01, kInlier = 0.003;
 
 struct Case {
@@ -198,16 +200,25 @@ json runMethod(const std::string& name, const Method& make, const std::vector<Ca
   int ok = 0;
   std::vector<double> secs;
   for (const auto& c : cases) {
-    const auto t0 = Clock::now();
-    const Eigen::Isometry3d T = locate(c);
-    secs.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    // each scene kRepetitions times, its fastest run counted: this VM's speed drifts by tens of
+    // per cent over minutes, and the methods run one after another
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    double best = 1e9;
+    for (int r = 0; r < kRepetitions; ++r) {
+      const auto t0 = Clock::now();
+      const Eigen::Isometry3d Tr = locate(c);
+      best = std::min(best, std::chrono::duration<double>(Clock::now() - t0).count());
+      if (r == 0) T = Tr;
+    }
+    secs.push_back(best);
     const PoseError e = poseError(lib->model(c.model).info, centroids.centroid(c.model), T, c.truth);
     ok += e.translation <= 2e-3 && e.rotation <= 2 * M_PI / 180;
   }
   std::vector<double> s = secs;
   std::sort(s.begin(), s.end());
   return {{"method", name}, {"success_percent", 100.0 * ok / cases.size()}, {"median_seconds", s[s.size() / 2]},
-          {"total_seconds", std::accumulate(s.begin(), s.end(), 0.0)}, {"scenes", cases.size()}};
+          {"total_seconds", std::accumulate(s.begin(), s.end(), 0.0)}, {"scenes", cases.size()},
+          {"repetitions_per_scene", kRepetitions}};
 }
 
 }  // namespace
