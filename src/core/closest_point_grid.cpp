@@ -61,7 +61,6 @@ ClosestPointGrid::ClosestPointGrid(const TriangleMesh& mesh, float cell, float m
       if (d < dc[k]) dc[k] = static_cast<float>(d);
     });
   }
-  listed_cells_ = static_cast<size_t>(std::count_if(dc.begin(), dc.end(), [&](float d) { return d <= reach; }));
   // pass 2: candidates (count, then fill)
   const double slack = 2 * half_diag + 1e-9;
   offsets_.assign(cells + 1, 0);

@@ -850,9 +850,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   double best = -1;
   // Every candidate is refined on a thinned scene (distance-field neighbours only) and scored;
   // the best one is then refined on all the ICP points and polished with exact neighbours.
-  // `bound`: the score to beat. The fitness (ray casts, neighbour queries) is skipped when the
-  // coverage alone cannot beat it: score = fitness × coverage with fitness <= 1.
-  auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, double bound, PartDetection* c) {
+  auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, PartDetection* c) {
     const Refined r = icp(s, m, T0, cfg, points, polish);
     if (!r.T.matrix().allFinite()) return false;
     if (support && belowSupport(m, r.T, *support) > cfg.max_support_penetration) return false;
@@ -860,7 +858,6 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
     c->pose = r.T.cast<double>();
     c->rmse = r.rmse;
     c->coverage = coverage(s, m, r.T, cfg.fitness_radius);
-    if (cfg.min_coverage > 0 && c->coverage <= bound) return false;
     c->fitness = visibleFitness(s, m, r.T, cfg);
     c->score = c->fitness * (cfg.min_coverage > 0 ? c->coverage : 1.0);
     return true;
@@ -871,7 +868,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   for (const auto& h : candidates) {
     if (!h.T.matrix().allFinite()) continue;
     PartDetection c;
-    if (evaluate(h.T, screen_points, false, best, &c) && c.score > best) {
+    if (evaluate(h.T, screen_points, false, &c) && c.score > best) {
       best = c.score;
       chosen = c;
     }
@@ -879,7 +876,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   PartDetection fine;
   if (best < 0) {
     fine = d;
-  } else if (!evaluate(chosen.pose.cast<float>(), all_points, true, -1.0, &fine)) {
+  } else if (!evaluate(chosen.pose.cast<float>(), all_points, true, &fine)) {
     fine = chosen;
   }
   fine.refine_seconds = seconds(t_refine);

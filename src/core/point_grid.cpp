@@ -66,19 +66,6 @@ PointGrid::PointGrid(const std::vector<Eigen::Vector3f>& points, float cell) : c
   }
 }
 
-int PointGrid::nearest(const Eigen::Vector3f& q, float r, float* d2) const {
-  int best = -1;
-  float best_d2 = r * r;
-  forEachWithin(q, r, [&](uint32_t i, float d) {
-    if (d < best_d2 || (d == best_d2 && best < 0)) {
-      best_d2 = d;
-      best = static_cast<int>(i);
-    }
-  });
-  if (d2) *d2 = best_d2;
-  return best;
-}
-
 std::vector<Eigen::Vector3f> gridNormals(const PointGrid& grid, const std::vector<Eigen::Vector3f>& queries,
                                          float radius, const Eigen::Vector3f& viewpoint) {
   std::vector<Eigen::Vector3f> out(queries.size(), Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
