@@ -44,6 +44,26 @@ struct MeshCheck {
 /// Checks topology; `min_area` in m² counts faces below it as degenerate.
 MeshCheck checkMesh(const TriangleMesh& mesh, double min_area = 1e-14);
 
+/// The mesh's flat faces and where they end. Triangles are grouped over shared edges (vertices
+/// welded by position) while their normals stay within `coplanar_angle` of the group's first;
+/// a group's boundary edges that meet a triangle turning by more than `crease_angle` (or no
+/// triangle) are its creases: where a point sliding over the face leaves the surface. Edges to a
+/// gently turning neighbour (the facets of a cylinder) are not creases.
+struct PlanarFaces {
+  struct Group {
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+    std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> creases;
+  };
+  std::vector<int> group;  ///< per mesh face (-1: degenerate)
+  std::vector<Group> groups;
+  /// Nearest crease of p's group to p projected on the group's plane (infinity if none).
+  double creaseDistance(int face, const Eigen::Vector3d& p) const;
+  /// How far p (on or near `face`) moves along the in-plane direction d (any length; the
+  /// answer is in units of d) before it crosses one of its group's creases; infinity if never.
+  double creaseExit(int face, const Eigen::Vector3d& p, const Eigen::Vector3d& d) const;
+};
+PlanarFaces planarFaces(const TriangleMesh& mesh, double coplanar_angle = 1e-3, double crease_angle = 0.35);
+
 /// Loads and validates: throws ConfigError if the file is unreadable, empty, has bad indices,
 /// degenerate faces or non-manifold edges.
 TriangleMesh loadValidMesh(const std::string& path, double scale = 1.0);

@@ -59,6 +59,17 @@ struct MatchingConfig {
   /// sample's tangent plane, which runs on past the edge (measured worse on the demo scan, see
   /// docs/localization.md). Cloud models always use the samples.
   bool icp_mesh_polish = true;
+  /// After the polish, move an accepted pose to the middle of its slack: the directions the
+  /// scanned faces constrain weakly (eigenvalues of their point-to-plane normal matrix below
+  /// icp_slack_eigen_ratio of the largest: a flat top's two shifts and turn) are followed up to
+  /// icp_slack_range each way to where scan points leave the mesh by icp_slack_tolerance, and
+  /// the pose goes halfway (mesh models only). On 9 simulated demo scans the median of the
+  /// per-scan median errors went 0.250 -> 0.091 mm (docs/localization.md).
+  bool icp_centre_slack = true;
+  double icp_slack_range = 0.005;       ///< m (turns: the same arc at half the part's diameter)
+  double icp_slack_tolerance = 0.0001;  ///< m
+  double icp_slack_eigen_ratio = 0.01;
+  int icp_slack_steps = 8;              ///< bisection steps in the bracket
   /// The polish's closest points from a grid of candidate triangles per cell (ClosestPointGrid,
   /// exact; meshes up to 5 000 faces) instead of Embree's BVH point query for every point
   /// (false: the library path, kept for comparison). Same answers, measured faster on the part

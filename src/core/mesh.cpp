@@ -1,6 +1,8 @@
 #include "cellsight/mesh.hpp"
 
 #include <algorithm>
+#include <array>
+#include <limits>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -358,6 +360,102 @@ MeshCheck checkMesh(const TriangleMesh& mesh, double min_area) {
     if (e.second > 2) ++c.nonmanifold_edges;
   }
   return c;
+}
+
+PlanarFaces planarFaces(const TriangleMesh& mesh, double coplanar_angle, double crease_angle) {
+  PlanarFaces out;
+  const size_t nf = mesh.faces.size();
+  out.group.assign(nf, -1);
+  // weld vertices by position (meshes often repeat a corner per face)
+  std::map<std::array<int64_t, 3>, int> weld;
+  std::vector<int> vid(mesh.vertices.size());
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    const Eigen::Vector3f& v = mesh.vertices[i];
+    const std::array<int64_t, 3> key{std::llround(v.x() * 1e7), std::llround(v.y() * 1e7), std::llround(v.z() * 1e7)};
+    vid[i] = weld.emplace(key, static_cast<int>(weld.size())).first->second;
+  }
+  std::vector<Eigen::Vector3d> normal(nf, Eigen::Vector3d::Zero());
+  std::map<std::pair<int, int>, std::vector<int>> edges;
+  auto edgeKey = [&](int a, int b) { return std::make_pair(std::min(vid[a], vid[b]), std::max(vid[a], vid[b])); };
+  for (size_t f = 0; f < nf; ++f) {
+    const auto& t = mesh.faces[f];
+    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>(), b = mesh.vertices[t[1]].cast<double>(),
+                          c = mesh.vertices[t[2]].cast<double>();
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    if (!(n.norm() > 0)) continue;
+    normal[f] = n.normalized();
+    for (int k = 0; k < 3; ++k) edges[edgeKey(t[k], t[(k + 1) % 3])].push_back(static_cast<int>(f));
+  }
+  const double cos_coplanar = std::cos(coplanar_angle), cos_crease = std::cos(crease_angle);
+  for (size_t seed = 0; seed < nf; ++seed) {
+    if (out.group[seed] >= 0 || normal[seed].squaredNorm() == 0) continue;
+    const int g = static_cast<int>(out.groups.size());
+    out.groups.emplace_back();
+    out.groups[g].normal = normal[seed];
+    std::vector<int> stack{static_cast<int>(seed)};
+    out.group[seed] = g;
+    while (!stack.empty()) {
+      const int f = stack.back();
+      stack.pop_back();
+      const auto& t = mesh.faces[f];
+      for (int k = 0; k < 3; ++k) {
+        for (int o : edges[edgeKey(t[k], t[(k + 1) % 3])]) {
+          if (out.group[o] >= 0 || normal[o].dot(normal[seed]) < cos_coplanar) continue;
+          out.group[o] = g;
+          stack.push_back(o);
+        }
+      }
+    }
+  }
+  // creases: a group's edges not shared within the group, whose other side turns sharply
+  for (size_t f = 0; f < nf; ++f) {
+    const int g = out.group[f];
+    if (g < 0) continue;
+    const auto& t = mesh.faces[f];
+    for (int k = 0; k < 3; ++k) {
+      const auto& adj = edges[edgeKey(t[k], t[(k + 1) % 3])];
+      bool inside = false, soft = false;
+      for (int o : adj) {
+        if (o == static_cast<int>(f)) continue;
+        if (out.group[o] == g) inside = true;
+        else if (normal[o].dot(normal[f]) >= cos_crease) soft = true;
+      }
+      if (inside || soft) continue;
+      out.groups[g].creases.emplace_back(mesh.vertices[t[k]].cast<double>(), mesh.vertices[t[(k + 1) % 3]].cast<double>());
+    }
+  }
+  return out;
+}
+
+double PlanarFaces::creaseDistance(int face, const Eigen::Vector3d& p) const {
+  double best = std::numeric_limits<double>::infinity();
+  if (face < 0 || face >= static_cast<int>(group.size()) || group[face] < 0) return best;
+  const Group& g = groups[group[face]];
+  for (const auto& [a, b] : g.creases) {
+    const Eigen::Vector3d e = b - a;
+    Eigen::Vector3d w = p - a;
+    w -= g.normal * g.normal.dot(w);
+    const double u = std::clamp(w.dot(e) / std::max(e.squaredNorm(), 1e-300), 0.0, 1.0);
+    best = std::min(best, (w - u * e).norm());
+  }
+  return best;
+}
+
+double PlanarFaces::creaseExit(int face, const Eigen::Vector3d& p, const Eigen::Vector3d& d) const {
+  double best = std::numeric_limits<double>::infinity();
+  if (face < 0 || face >= static_cast<int>(group.size()) || group[face] < 0) return best;
+  const Group& g = groups[group[face]];
+  const Eigen::Vector3d& n = g.normal;
+  for (const auto& [a, b] : g.creases) {
+    // p + s·d = a + u·e in the plane: s = -((w×e)·n)/((d×e)·n), u = ((w×d)·n)/((e×d)·n)
+    const Eigen::Vector3d e = b - a, w = p - a;
+    const double den = d.cross(e).dot(n);
+    if (std::abs(den) < 1e-300) continue;
+    const double s = -w.cross(e).dot(n) / den;
+    const double u = w.cross(d).dot(n) / -den;
+    if (s >= 0 && u >= 0 && u <= 1) best = std::min(best, s);
+  }
+  return best;
 }
 
 TriangleMesh loadValidMesh(const std::string& path, double scale) {

@@ -12,6 +12,10 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <cstdio>
+#include <cstdlib>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -261,6 +265,7 @@ struct ModelMatcher::ModelIndex {
   PpfTable ppf;         // its point pair features (Drost et al. 2010)
   RayCaster caster;  // the mesh in the model frame (self-occlusion)
   ClosestPointGrid closest;  // candidate triangles per cell for the polish (empty: Embree only)
+  PlanarFaces faces;         // flat faces and their creases (slack centring)
   bool has_mesh = true;  // false for a cloud model: visibility from the normals only
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   float diameter = 0;
@@ -614,9 +619,184 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   return top;
 }
 
+/// The mesh's closest point to q (model frame) within max_d: the candidate grid, else Embree.
+ClosestPoint meshClosest(const ModelMatcher::ModelIndex& m, const Eigen::Vector3f& q, float max_d) {
+  bool covered = false;
+  ClosestPoint c;
+  if (!m.closest.empty()) c = m.closest.closestPoint(q, max_d, &covered);
+  if (!covered && !(m.closest.margin() >= max_d)) c = m.caster.closestPoint(q, max_d);
+  return c;
+}
+
+/// One scene point in the ICP's exact polish (model frame).
+struct PolishRow {
+  Eigen::Vector3d q, n;  // the point; the face normal, or (outside) the direction from its closest point
+  double r;              // signed distance along n
+  int tri = -1;          // its closest mesh triangle (-1: not from the mesh)
+  bool outside = false;  // beyond an edge or corner: closest to it
+};
+
+/// Centres the pose in its slack. A part seen from one side is often pinned only by the ends
+/// of its scanned faces: a flat top is free in-plane (two translations and the turn about its
+/// normal) while its scanned patch stays inside the face, and the patch is smaller than the face
+/// by what the scanner loses at edges (segment ends, the last line before an edge). ICP stops
+/// where the first scan points reach an edge: one end of the slack. Here each direction the
+/// points over faces constrain weakly (eigenvalues of their point-to-plane normal matrix below
+/// icp_slack_eigen_ratio of the largest) is followed both ways to where the k-th point leaves
+/// the surface (it moves off its face's plane by icp_slack_tolerance, or past one of the face's
+/// creases: PlanarFaces), and the pose moves to the middle: the centre of the poses the scan
+/// allows, exact when the scanner loses as much at opposite edges. Motions are linearised at the
+/// polished pose (sub-millimetre and sub-degree). A direction bounded on one side or none (a
+/// turn about an axis of symmetry) is left alone. Rotates the rows with the pose; returns the
+/// change (model frame, applied after X).
+Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<PolishRow>& rows, const MatchingConfig& cfg) {
+  Eigen::Isometry3d total = Eigen::Isometry3d::Identity();
+  if (rows.size() < 20 || m.faces.groups.empty()) return total;
+  const double L = std::max(0.5 * static_cast<double>(m.diameter), 1e-3);
+  const double tol = cfg.icp_slack_tolerance;
+  // the rows were measured before the polish's last step: measure again at the polished pose
+  const float cap = static_cast<float>(std::max(2 * tol + 3 * cfg.icp_huber_floor, 0.001));
+  for (auto& r : rows) {
+    const ClosestPoint c = meshClosest(m, r.q.cast<float>(), cap);
+    if (!c.found) {
+      r.tri = -1;
+      continue;
+    }
+    const Eigen::Vector3d dv = r.q - c.point.cast<double>(), nf = c.normal.cast<double>();
+    const double d = dv.norm();
+    r.tri = c.triangle;
+    r.outside = !(d < 1e-9 || std::abs(nf.dot(dv)) >= 0.999 * d);
+    r.n = r.outside ? Eigen::Vector3d(dv / d) : nf;
+    r.r = r.outside ? d : nf.dot(dv);
+  }
+  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+  std::vector<double> crease(rows.size());
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const PolishRow& r = rows[i];
+    if (r.tri < 0) continue;
+    crease[i] = r.outside ? 0.0 : m.faces.creaseDistance(r.tri, r.q);
+    if (r.outside) continue;
+    Eigen::Matrix<double, 6, 1> J;
+    J << r.q.cross(r.n) / L, r.n;
+    A += J * J.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(A);
+  const double top = eig.eigenvalues().maxCoeff();
+  if (!(top > 0)) return total;
+  const size_t k = std::max<size_t>(2, rows.size() / 500);  // the k-th point leaving ends the slack
+  for (int pass = 0; pass < 2; ++pass) {
+    for (int e = 0; e < 6; ++e) {
+      if (eig.eigenvalues()[e] > cfg.icp_slack_eigen_ratio * top) continue;
+      const Eigen::Vector3d w = eig.eigenvectors().col(e).head<3>() / L, t = eig.eigenvectors().col(e).tail<3>();
+      // Each way: the motion at which the k-th point leaves. A first-order guess for every point
+      // (off its face's plane, or across one of the face's creases) brackets it; the exact
+      // closest point then decides, for the points the guess puts inside the bracket (a point
+      // near a crease may just pass onto the next face, so guesses are only guesses).
+      auto leaves = [&](size_t i, double tx) {
+        const PolishRow& r = rows[i];
+        const Eigen::Vector3d q = r.q + tx * (w.cross(r.q) + t);
+        return !meshClosest(m, q.cast<float>(), static_cast<float>(std::abs(r.r) + tol)).found;
+      };
+      double end[2] = {0, 0};
+      bool bounded = true;
+      for (int side = 0; side < 2 && bounded; ++side) {
+        const double sgn = side ? -1.0 : 1.0;
+        // lower bounds first (off the plane exactly; a crease no nearer than its distance), then
+        // crease exits in order of the bound until the k-th smallest guess is settled
+        struct Guess {
+          double lb, x;  // x < 0: not computed yet
+          size_t i;
+          Eigen::Vector3d vt;
+        };
+        std::vector<Guess> guess;
+        guess.reserve(rows.size());
+        for (size_t i = 0; i < rows.size(); ++i) {
+          const PolishRow& r = rows[i];
+          if (r.tri < 0) continue;
+          const Eigen::Vector3d v = sgn * (w.cross(r.q) + t);
+          const double u = r.n.dot(v);
+          Guess g{0, 0, i, Eigen::Vector3d::Zero()};
+          if (r.outside) {
+            g.x = u > 0 ? tol / u : std::numeric_limits<double>::infinity();
+            g.lb = g.x;
+          } else {
+            g.x = u > 0 ? (std::abs(r.r) + tol - r.r) / u
+                        : u < 0 ? (std::abs(r.r) + tol + r.r) / -u : std::numeric_limits<double>::infinity();
+            g.vt = v - r.n * u;
+            const double speed = g.vt.norm();
+            g.lb = speed > 0 ? std::min(g.x, crease[i] / speed) : g.x;
+            if (g.lb < g.x) g.x = -g.x - 1;  // crease exit still to compute (off-plane: -x - 1)
+          }
+          guess.push_back(g);
+        }
+        auto settle = [&](Guess& g) {
+          if (g.x >= 0) return g.x;
+          const double off = -g.x - 1;
+          g.x = std::min(off, m.faces.creaseExit(rows[g.i].tri, rows[g.i].q, g.vt) + tol / g.vt.norm());
+          return g.x;
+        };
+        if (guess.size() < k) {
+          bounded = false;
+          break;
+        }
+        std::vector<double> kbest;  // max-heap of the k smallest settled guesses
+        for (auto& g : guess) {
+          if (kbest.size() == k && g.lb >= kbest.front()) continue;
+          const double x = settle(g);
+          if (kbest.size() < k) {
+            kbest.push_back(x);
+            std::push_heap(kbest.begin(), kbest.end());
+          } else if (x < kbest.front()) {
+            std::pop_heap(kbest.begin(), kbest.end());
+            kbest.back() = x;
+            std::push_heap(kbest.begin(), kbest.end());
+          }
+        }
+        double hi = std::min(cfg.icp_slack_range, std::max(2 * kbest.front(), 1e-5));
+        std::vector<size_t> exits;
+        for (;;) {
+          exits.clear();
+          for (auto& g : guess) {
+            if (g.lb > 3 * hi || (g.x >= 0 && g.x > 3 * hi)) continue;  // beyond; unsettled: ask the mesh
+            if (leaves(g.i, sgn * hi)) exits.push_back(g.i);
+          }
+          if (exits.size() >= k || hi >= cfg.icp_slack_range) break;
+          hi = std::min(cfg.icp_slack_range, 4 * hi);
+        }
+        if (exits.size() < k) {
+          bounded = false;
+          break;
+        }
+        double lo = 0;  // allowed; hi: not allowed
+        for (int it = 0; it < cfg.icp_slack_steps; ++it) {
+          const double mid = 0.5 * (lo + hi);
+          size_t n = 0;
+          for (size_t j = 0; j < exits.size() && n < k; ++j) n += leaves(exits[j], sgn * mid) ? 1 : 0;
+          (n < k ? lo : hi) = mid;
+        }
+        end[side] = lo;
+      }
+      if (!bounded) continue;
+      const double hi = end[0], lo = -end[1];
+      const double c = 0.5 * (hi + lo);
+      Eigen::Isometry3d D = Eigen::Isometry3d::Identity();
+      const Eigen::Vector3d wc = c * w;
+      if (wc.norm() > 1e-15) D.linear() = Eigen::AngleAxisd(wc.norm(), wc.normalized()).toRotationMatrix();
+      D.translation() = c * t;
+      for (auto& r : rows) {
+        r.q = D * r.q;
+        r.n = D.linear() * r.n;
+      }
+      total = D * total;
+    }
+  }
+  return total;
+}
+
 struct Refined {
   Eigen::Isometry3f T = Eigen::Isometry3f::Identity();
   double rmse = 0;
+  std::vector<PolishRow> polished;  // the exact polish's last rows, at T (mesh models)
 };
 
 /// Robust point-to-plane ICP of the scene points onto the model (Huber weights, shrinking
@@ -639,14 +819,12 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
   std::vector<float> d2(1);
   std::vector<double> res;
   Eigen::Matrix<double, 6, 1> prev_step = Eigen::Matrix<double, 6, 1>::Zero();  // scaled
+  std::vector<PolishRow> polished;  // the last exact iteration's rows (at the final pose)
   for (int it = 0; it < cfg.icp_iterations + (polish ? exact_iterations : 0); ++it) {
     const bool exact = it >= cfg.icp_iterations || exact_done > 0;
     Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
     Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
-    struct Row {
-      Eigen::Vector3d q, n;
-      double r;
-    };
+    using Row = PolishRow;
     std::vector<Row> rows;
     rows.reserve(s.icp_points.size() / stride + 1);
     for (size_t pi = 0; pi < s.icp_points.size(); pi += stride) {
@@ -665,9 +843,9 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
         const Eigen::Vector3d cp = c.point.cast<double>(), nf = c.normal.cast<double>(), dv = q - cp;
         const double dist = dv.norm();
         if (dist < 1e-9 || std::abs(nf.dot(dv)) >= 0.999 * dist) {
-          rows.push_back({q, nf, nf.dot(dv)});  // over the face: point-to-plane
+          rows.push_back({q, nf, nf.dot(dv), c.triangle, false});  // over the face: point-to-plane
         } else {
-          rows.push_back({q, dv / dist, dist});  // beyond an edge or corner: toward it
+          rows.push_back({q, dv / dist, dist, c.triangle, true});  // beyond an edge or corner: toward it
         }
         continue;
       }
@@ -681,7 +859,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
       }
       const Eigen::Vector3d mp = fp[j].cast<double>(), n = fn[j].cast<double>();
       if ((q - mp).norm() > dmax) continue;
-      rows.push_back({q, n, n.dot(q - mp)});
+      rows.push_back({q, n, n.dot(q - mp), -1, false});
     }
     if (rows.size() < 6) break;
     res.resize(rows.size());
@@ -725,6 +903,10 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     if (angle > 1e-12) D.linear() = Eigen::AngleAxisd(angle, x.head<3>() / angle).toRotationMatrix();
     D.translation() = x.tail<3>();
     X = D * X;
+    if (exact && m.has_mesh && cfg.icp_mesh_polish) {
+      polished = std::move(rows);
+      for (auto& row : polished) row.q = D * row.q;
+    }
     dmax = std::max(dmin, std::min(dmax, 4 * sigma + cfg.icp_spacing));
     // converged: the field's correspondences are good to its cell, so stop them at 10 µm steps;
     // the exact polish stops at 1 µm
@@ -754,6 +936,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
   Refined r;
   r.T = X.inverse().cast<float>();
   r.rmse = rmse;
+  r.polished = std::move(polished);
   return r;
 }
 
@@ -811,6 +994,8 @@ float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T
   return m.extremes.empty() ? 0.f : -lowest;
 }
 
+bool accepted(const PartDetection& d, const MatchingConfig& cfg);
+
 PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                     const Eigen::Vector4f* support, uint64_t seed) {
   PartDetection d;
@@ -851,15 +1036,27 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   // Every candidate is refined on a thinned scene (distance-field neighbours only) and scored;
   // the best one is then refined on all the ICP points and polished with exact neighbours.
   auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, PartDetection* c) {
-    const Refined r = icp(s, m, T0, cfg, points, polish);
+    Refined r = icp(s, m, T0, cfg, points, polish);
     if (!r.T.matrix().allFinite()) return false;
     if (support && belowSupport(m, r.T, *support) > cfg.max_support_penetration) return false;
-    *c = d;
-    c->pose = r.T.cast<double>();
-    c->rmse = r.rmse;
-    c->coverage = coverage(s, m, r.T, cfg.fitness_radius);
-    c->fitness = visibleFitness(s, m, r.T, cfg);
-    c->score = c->fitness * (cfg.min_coverage > 0 ? c->coverage : 1.0);
+    auto score = [&](const Eigen::Isometry3f& T, PartDetection* out) {
+      *out = d;
+      out->pose = T.cast<double>();
+      out->rmse = r.rmse;
+      out->coverage = coverage(s, m, T, cfg.fitness_radius);
+      out->fitness = visibleFitness(s, m, T, cfg);
+      out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
+    };
+    score(r.T, c);
+    // a polished pose good enough to report goes to the middle of its slack (kept if it still is)
+    if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {
+      const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, cfg).inverse()).cast<float>();
+      PartDetection centred;
+      if (T.matrix().allFinite() && !(support && belowSupport(m, T, *support) > cfg.max_support_penetration)) {
+        score(T, &centred);
+        if (accepted(centred, cfg)) *c = centred;
+      }
+    }
     return true;
   };
   const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
@@ -1067,6 +1264,7 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
   m->has_mesh = !e.mesh.faces.empty();
   if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
   m->caster.commit();
+  if (m->has_mesh) m->faces = planarFaces(e.mesh);
   if (m->has_mesh && config_.icp_mesh_polish && config_.closest_point_grid && e.mesh.faces.size() <= 5000) {
     const float dmin = static_cast<float>(std::max(3 * config_.icp_spacing, 0.5 * config_.fitness_radius));
     const float cell = static_cast<float>(std::max(2 * config_.icp_spacing, 0.001));
@@ -1242,6 +1440,10 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.icp_exact_iterations = m.getInt("icp_exact_iterations", c.icp_exact_iterations);
   if (c.icp_exact_iterations < 0) m.fail("icp_exact_iterations", "must be >= 0");
   c.icp_mesh_polish = m.getBool("icp_mesh_polish", c.icp_mesh_polish);
+  c.icp_centre_slack = m.getBool("icp_centre_slack", c.icp_centre_slack);
+  positive("icp_slack_range", c.icp_slack_range);
+  positive("icp_slack_tolerance", c.icp_slack_tolerance);
+  share("icp_slack_eigen_ratio", c.icp_slack_eigen_ratio);
   c.closest_point_grid = m.getBool("closest_point_grid", c.closest_point_grid);
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
   if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");

@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <fstream>
 
@@ -101,4 +102,39 @@ TEST(Mesh, BadMeshesAreRejectedWithTheFileNamed) {
   EXPECT_THROW(loadMesh(dir + "/trunc.ply"), ConfigError);
   cellsight_test::writeText(dir + "/x.obj", "v 0 0 0\n");
   EXPECT_THROW(loadMesh(dir + "/x.obj"), ConfigError);
+}
+
+TEST(PlanarFaces, BoxFacesEndAtTheirFourEdges) {
+  const TriangleMesh box = makeBox(Eigen::Vector3d(0.04, 0.02, 0.01));
+  const PlanarFaces f = planarFaces(box);
+  ASSERT_EQ(f.groups.size(), 6u);
+  for (const auto& g : f.groups) EXPECT_EQ(g.creases.size(), 4u);
+  // the top face: the triangle whose normal is +z
+  int top = -1;
+  for (size_t i = 0; i < box.faces.size(); ++i) {
+    if (f.groups[f.group[i]].normal.z() > 0.99) top = static_cast<int>(i);
+  }
+  ASSERT_GE(top, 0);
+  const Eigen::Vector3d p(0.005, 0.0, 0.005);
+  EXPECT_NEAR(f.creaseDistance(top, p), 0.010, 1e-9);  // to the y = ±0.01 edges
+  EXPECT_NEAR(f.creaseExit(top, p, Eigen::Vector3d(1, 0, 0)), 0.015, 1e-9);
+  EXPECT_NEAR(f.creaseExit(top, p, Eigen::Vector3d(-2, 0, 0)), 0.0125, 1e-9);  // in units of d
+  EXPECT_NEAR(f.creaseExit(top, p, Eigen::Vector3d(0, -1, 0)), 0.010, 1e-9);
+  EXPECT_TRUE(std::isinf(f.creaseExit(-1, p, Eigen::Vector3d(1, 0, 0))));
+}
+
+TEST(PlanarFaces, CylinderFacetsAreNotCreases) {
+  const TriangleMesh cyl = makeCylinder(0.01, 0.03, 48);
+  const PlanarFaces f = planarFaces(cyl);
+  ASSERT_EQ(f.groups.size(), 50u);  // two caps, 48 facets
+  size_t caps = 0;
+  for (const auto& g : f.groups) {
+    if (std::abs(g.normal.z()) > 0.99) {
+      ++caps;
+      EXPECT_EQ(g.creases.size(), 48u);  // the rim
+    } else {
+      EXPECT_EQ(g.creases.size(), 2u);  // top and bottom rim only: 7.5 deg between facets is not a crease
+    }
+  }
+  EXPECT_EQ(caps, 2u);
 }
