@@ -649,14 +649,16 @@ struct PolishRow {
 /// polished pose (sub-millimetre and sub-degree). A direction bounded on one side or none (a
 /// turn about an axis of symmetry) is left alone. Rotates the rows with the pose; returns the
 /// change (model frame, applied after X).
-Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<PolishRow>& rows, const MatchingConfig& cfg) {
+Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<PolishRow>& rows, bool fresh,
+                                const MatchingConfig& cfg) {
   Eigen::Isometry3d total = Eigen::Isometry3d::Identity();
   if (rows.size() < 20 || m.faces.groups.empty()) return total;
   const double L = std::max(0.5 * static_cast<double>(m.diameter), 1e-3);
   const double tol = cfg.icp_slack_tolerance;
-  // the rows were measured before the polish's last step: measure again at the polished pose
+  // rows measured before a last step that was not negligible: measure again at the final pose
   const float cap = static_cast<float>(std::max(2 * tol + 3 * cfg.icp_huber_floor, 0.001));
   for (auto& r : rows) {
+    if (fresh) break;
     const ClosestPoint c = meshClosest(m, r.q.cast<float>(), cap);
     if (!c.found) {
       r.tri = -1;
@@ -688,6 +690,10 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
     for (int e = 0; e < 6; ++e) {
       if (eig.eigenvalues()[e] > cfg.icp_slack_eigen_ratio * top) continue;
       const Eigen::Vector3d w = eig.eigenvectors().col(e).head<3>() / L, t = eig.eigenvectors().col(e).tail<3>();
+      // a turn about an axis of symmetry (a sphere: any turn about its centre) moves nothing
+      if (m.info.symmetry.type == Symmetry::Type::kSpherical && (w.cross(m.centroid) + t).norm() < 0.5 * w.norm() * L) continue;
+      if (m.info.symmetry.type == Symmetry::Type::kAxial &&
+          std::abs(w.dot(m.info.symmetry.axis.normalized())) * L > 0.9 * eig.eigenvectors().col(e).norm()) continue;
       // Each way: the motion at which the k-th point leaves. A first-order guess for every point
       // (off its face's plane, or across one of the face's creases) brackets it; the exact
       // closest point then decides, for the points the guess puts inside the bracket (a point
@@ -697,18 +703,25 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
         const Eigen::Vector3d q = r.q + tx * (w.cross(r.q) + t);
         return !meshClosest(m, q.cast<float>(), static_cast<float>(std::abs(r.r) + tol)).found;
       };
-      double end[2] = {0, 0};
+      double end[2] = {0, 0}, first[2] = {0, 0};
       bool bounded = true;
+      struct Guess {
+        double lb, x;  // x < 0: not computed yet
+        size_t i;
+        Eigen::Vector3d vt;
+      };
+      std::vector<Guess> guesses[2];
+      auto settle = [&](Guess& g) {
+        if (g.x >= 0) return g.x;
+        const double off = -g.x - 1;
+        g.x = std::min(off, m.faces.creaseExit(rows[g.i].tri, rows[g.i].q, g.vt) + tol / g.vt.norm());
+        return g.x;
+      };
       for (int side = 0; side < 2 && bounded; ++side) {
         const double sgn = side ? -1.0 : 1.0;
         // lower bounds first (off the plane exactly; a crease no nearer than its distance), then
         // crease exits in order of the bound until the k-th smallest guess is settled
-        struct Guess {
-          double lb, x;  // x < 0: not computed yet
-          size_t i;
-          Eigen::Vector3d vt;
-        };
-        std::vector<Guess> guess;
+        std::vector<Guess>& guess = guesses[side];
         guess.reserve(rows.size());
         for (size_t i = 0; i < rows.size(); ++i) {
           const PolishRow& r = rows[i];
@@ -729,12 +742,6 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
           }
           guess.push_back(g);
         }
-        auto settle = [&](Guess& g) {
-          if (g.x >= 0) return g.x;
-          const double off = -g.x - 1;
-          g.x = std::min(off, m.faces.creaseExit(rows[g.i].tri, rows[g.i].q, g.vt) + tol / g.vt.norm());
-          return g.x;
-        };
         if (guess.size() < k) {
           bounded = false;
           break;
@@ -752,7 +759,12 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
             std::push_heap(kbest.begin(), kbest.end());
           }
         }
-        double hi = std::min(cfg.icp_slack_range, std::max(2 * kbest.front(), 1e-5));
+        first[side] = kbest.front();
+      }
+      for (int side = 0; side < 2 && bounded; ++side) {
+        const double sgn = side ? -1.0 : 1.0;
+        std::vector<Guess>& guess = guesses[side];
+        double hi = std::min(cfg.icp_slack_range, std::max(2 * first[side], 1e-5));
         std::vector<size_t> exits;
         for (;;) {
           exits.clear();
@@ -797,6 +809,7 @@ struct Refined {
   Eigen::Isometry3f T = Eigen::Isometry3f::Identity();
   double rmse = 0;
   std::vector<PolishRow> polished;  // the exact polish's last rows, at T (mesh models)
+  bool polished_fresh = false;      // their distances hold at T (the last step was below 1 µm)
 };
 
 /// Robust point-to-plane ICP of the scene points onto the model (Huber weights, shrinking
@@ -820,6 +833,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
   std::vector<double> res;
   Eigen::Matrix<double, 6, 1> prev_step = Eigen::Matrix<double, 6, 1>::Zero();  // scaled
   std::vector<PolishRow> polished;  // the last exact iteration's rows (at the final pose)
+  bool polished_fresh = false;      // measured within a converged step of the final pose
   for (int it = 0; it < cfg.icp_iterations + (polish ? exact_iterations : 0); ++it) {
     const bool exact = it >= cfg.icp_iterations || exact_done > 0;
     Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
@@ -927,6 +941,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     prev_step = xs;
     const bool small = (w.norm() < 10 * tol && v.norm() < tol) || bounced;
     if (exact) {
+      polished_fresh = small;
       if (++exact_done >= exact_iterations || small) break;
     } else if (small) {
       if (!polish) break;
@@ -937,6 +952,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
   r.T = X.inverse().cast<float>();
   r.rmse = rmse;
   r.polished = std::move(polished);
+  r.polished_fresh = polished_fresh;
   return r;
 }
 
@@ -1050,7 +1066,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
     score(r.T, c);
     // a polished pose good enough to report goes to the middle of its slack (kept if it still is)
     if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {
-      const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, cfg).inverse()).cast<float>();
+      const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, r.polished_fresh, cfg).inverse()).cast<float>();
       PartDetection centred;
       if (T.matrix().allFinite() && !(support && belowSupport(m, T, *support) > cfg.max_support_penetration)) {
         score(T, &centred);
@@ -1444,6 +1460,8 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("icp_slack_range", c.icp_slack_range);
   positive("icp_slack_tolerance", c.icp_slack_tolerance);
   share("icp_slack_eigen_ratio", c.icp_slack_eigen_ratio);
+  c.icp_slack_steps = m.getInt("icp_slack_steps", c.icp_slack_steps);
+  if (c.icp_slack_steps < 1) m.fail("icp_slack_steps", "must be >= 1");
   c.closest_point_grid = m.getBool("closest_point_grid", c.closest_point_grid);
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
   if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");
