@@ -34,7 +34,7 @@ struct MatchingConfig {
   double ppf_sampling = 0.0035;      ///< m, points of model and scene paired
   double ppf_distance_step = 0.003;  ///< m, pair distance quantisation
   int ppf_angle_bins = 30;           ///< angle quantisation (12°) and rotation bins
-  int ppf_ref_step = 3;              ///< every n-th scene point is a reference
+  int ppf_ref_step = 4;              ///< every n-th scene point is a reference
   /// best-voted poses scored on the distance field; scene points are scored in a fixed random
   /// order and a pose whose first 64 explain less than half the best pose's share stops there
   int ppf_candidates = 100;
