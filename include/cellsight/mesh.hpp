@@ -53,6 +53,7 @@ struct PlanarFaces {
   struct Group {
     Eigen::Vector3d normal = Eigen::Vector3d::Zero();
     std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> creases;
+    std::vector<std::pair<Eigen::Vector3d, double>> crease_bounds;  ///< midpoint, half length
   };
   std::vector<int> group;  ///< per mesh face (-1: degenerate)
   std::vector<Group> groups;

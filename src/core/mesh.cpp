@@ -424,6 +424,9 @@ PlanarFaces planarFaces(const TriangleMesh& mesh, double coplanar_angle, double 
       out.groups[g].creases.emplace_back(mesh.vertices[t[k]].cast<double>(), mesh.vertices[t[(k + 1) % 3]].cast<double>());
     }
   }
+  for (auto& g : out.groups) {
+    for (const auto& [a, b] : g.creases) g.crease_bounds.emplace_back(0.5 * (a + b), 0.5 * (b - a).norm());
+  }
   return out;
 }
 
@@ -431,7 +434,11 @@ double PlanarFaces::creaseDistance(int face, const Eigen::Vector3d& p) const {
   double best = std::numeric_limits<double>::infinity();
   if (face < 0 || face >= static_cast<int>(group.size()) || group[face] < 0) return best;
   const Group& g = groups[group[face]];
-  for (const auto& [a, b] : g.creases) {
+  for (size_t c = 0; c < g.creases.size(); ++c) {
+    // no nearer than its midpoint's distance less half its length
+    const double lower = (p - g.crease_bounds[c].first).norm() - g.crease_bounds[c].second;
+    if (lower >= best) continue;
+    const auto& [a, b] = g.creases[c];
     const Eigen::Vector3d e = b - a;
     Eigen::Vector3d w = p - a;
     w -= g.normal * g.normal.dot(w);
