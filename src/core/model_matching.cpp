@@ -1418,6 +1418,10 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
     v = m.getDouble(key, v);
     if (!(v > 0)) m.fail(key, "must be > 0");
   };
+  auto atLeast = [&](const char* key, int& v, int lowest) {
+    v = m.getInt(key, v);
+    if (v < lowest) m.fail(key, "must be >= " + std::to_string(lowest));
+  };
   auto share = [&](const char* key, double& v) {
     v = m.getDouble(key, v);
     if (!(v >= 0 && v <= 1)) m.fail(key, "must be in [0, 1]");
@@ -1437,31 +1441,26 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   if (c.ppf_angle_bins < 4 || c.ppf_angle_bins > 255) m.fail("ppf_angle_bins", "must be in [4, 255]");
   c.ppf_ref_step = m.getInt("ppf_ref_step", c.ppf_ref_step);
   if (c.ppf_ref_step < 1) m.fail("ppf_ref_step", "must be >= 1");
-  c.ppf_candidates = m.getInt("ppf_candidates", c.ppf_candidates);
-  if (c.ppf_candidates < 1) m.fail("ppf_candidates", "must be >= 1");
-  c.max_iterations = m.getInt("max_iterations", c.max_iterations);
-  if (c.max_iterations < 1) m.fail("max_iterations", "must be >= 1");
+  atLeast("ppf_candidates", c.ppf_candidates, 1);
+  atLeast("max_iterations", c.max_iterations, 1);
   c.confidence = m.getDouble("confidence", c.confidence);
   if (!(c.confidence > 0 && c.confidence < 1)) m.fail("confidence", "must be in (0, 1)");
   share("edge_similarity", c.edge_similarity);
   positive("normal_tolerance", c.normal_tolerance);
   positive("inlier_distance", c.inlier_distance);
-  c.refine_candidates = m.getInt("refine_candidates", c.refine_candidates);
-  if (c.refine_candidates < 1) m.fail("refine_candidates", "must be >= 1");
+  atLeast("refine_candidates", c.refine_candidates, 1);
   positive("icp_spacing", c.icp_spacing);
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);
   positive("icp_screen_points", c.icp_screen_points);
   positive("max_cluster_points", c.max_cluster_points);
-  c.icp_exact_iterations = m.getInt("icp_exact_iterations", c.icp_exact_iterations);
-  if (c.icp_exact_iterations < 0) m.fail("icp_exact_iterations", "must be >= 0");
+  atLeast("icp_exact_iterations", c.icp_exact_iterations, 0);
   c.icp_mesh_polish = m.getBool("icp_mesh_polish", c.icp_mesh_polish);
   c.icp_centre_slack = m.getBool("icp_centre_slack", c.icp_centre_slack);
   positive("icp_slack_range", c.icp_slack_range);
   positive("icp_slack_tolerance", c.icp_slack_tolerance);
   share("icp_slack_eigen_ratio", c.icp_slack_eigen_ratio);
-  c.icp_slack_steps = m.getInt("icp_slack_steps", c.icp_slack_steps);
-  if (c.icp_slack_steps < 1) m.fail("icp_slack_steps", "must be >= 1");
+  atLeast("icp_slack_steps", c.icp_slack_steps, 1);
   c.closest_point_grid = m.getBool("closest_point_grid", c.closest_point_grid);
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
   if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");
