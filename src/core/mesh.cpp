@@ -434,14 +434,16 @@ double PlanarFaces::creaseDistance(int face, const Eigen::Vector3d& p) const {
   double best = std::numeric_limits<double>::infinity();
   if (face < 0 || face >= static_cast<int>(group.size()) || group[face] < 0) return best;
   const Group& g = groups[group[face]];
+  if (g.creases.empty()) return best;
+  // p on the group's plane (every crease lies in it)
+  const Eigen::Vector3d pp = p - g.normal * g.normal.dot(p - g.creases.front().first);
   for (size_t c = 0; c < g.creases.size(); ++c) {
     // no nearer than its midpoint's distance less half its length
-    const double lower = (p - g.crease_bounds[c].first).norm() - g.crease_bounds[c].second;
+    const double lower = (pp - g.crease_bounds[c].first).norm() - g.crease_bounds[c].second;
     if (lower >= best) continue;
     const auto& [a, b] = g.creases[c];
     const Eigen::Vector3d e = b - a;
-    Eigen::Vector3d w = p - a;
-    w -= g.normal * g.normal.dot(w);
+    const Eigen::Vector3d w = pp - a;
     const double u = std::clamp(w.dot(e) / std::max(e.squaredNorm(), 1e-300), 0.0, 1.0);
     best = std::min(best, (w - u * e).norm());
   }

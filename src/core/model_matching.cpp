@@ -795,8 +795,14 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
       const Eigen::Vector3d wc = c * w;
       if (wc.norm() > 1e-15) D.linear() = Eigen::AngleAxisd(wc.norm(), wc.normalized()).toRotationMatrix();
       D.translation() = c * t;
-      for (auto& r : rows) {
-        r.q = D * r.q;
+      // the next direction starts from here: first-order distances, and crease distances kept
+      // as lower bounds (less the point's move)
+      for (size_t i = 0; i < rows.size(); ++i) {
+        PolishRow& r = rows[i];
+        const Eigen::Vector3d q = D * r.q;
+        if (!r.outside) r.r += r.n.dot(q - r.q);
+        crease[i] = std::max(0.0, crease[i] - (q - r.q).norm());
+        r.q = q;
         r.n = D.linear() * r.n;
       }
       total = D * total;
@@ -849,10 +855,7 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
         // exact: the closest point of the mesh itself. A scan point beyond a face's edge is
         // pulled back over the edge; against the nearest sample's tangent plane it would not
         // be (the plane runs on past the edge), and a flat part could slide.
-        bool covered = false;
-        ClosestPoint c;
-        if (!m.closest.empty()) c = m.closest.closestPoint(q.cast<float>(), static_cast<float>(dmax), &covered);
-        if (!covered && !(m.closest.margin() >= dmax)) c = m.caster.closestPoint(q.cast<float>(), static_cast<float>(dmax));
+        const ClosestPoint c = meshClosest(m, q.cast<float>(), static_cast<float>(dmax));
         if (!c.found) continue;
         const Eigen::Vector3d cp = c.point.cast<double>(), nf = c.normal.cast<double>(), dv = q - cp;
         const double dist = dv.norm();

@@ -138,3 +138,15 @@ TEST(PlanarFaces, CylinderFacetsAreNotCreases) {
   }
   EXPECT_EQ(caps, 2u);
 }
+
+TEST(PlanarFaces, CreaseDistanceIsMeasuredInTheFacePlane) {
+  const TriangleMesh box = makeBox(Eigen::Vector3d(0.04, 0.02, 0.01));
+  const PlanarFaces f = planarFaces(box);
+  int top = -1;
+  for (size_t i = 0; i < box.faces.size(); ++i) {
+    if (f.groups[f.group[i]].normal.z() > 0.99) top = static_cast<int>(i);
+  }
+  ASSERT_GE(top, 0);
+  // 3 mm above the top face, 1 mm inside its +y edge: 1 mm in the plane, not sqrt(10) mm
+  EXPECT_NEAR(f.creaseDistance(top, Eigen::Vector3d(0.0, 0.009, 0.008)), 0.001, 1e-9);
+}
