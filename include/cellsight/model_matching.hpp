@@ -64,7 +64,7 @@ struct MatchingConfig {
   /// icp_slack_eigen_ratio of the largest: a flat top's two shifts and turn) are followed up to
   /// icp_slack_range each way to where scan points leave the mesh by icp_slack_tolerance, and
   /// the pose goes halfway (mesh models only). On 9 simulated demo scans the median of the
-  /// per-scan median errors went 0.250 -> 0.117 mm (docs/localization.md).
+  /// per-scan median errors went 0.250 -> 0.084 mm (docs/localization.md).
   bool icp_centre_slack = true;
   double icp_slack_range = 0.005;       ///< m (turns: the same arc at half the part's diameter)
   double icp_slack_tolerance = 0.0001;  ///< m
