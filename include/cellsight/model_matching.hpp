@@ -35,6 +35,9 @@ struct MatchingConfig {
   double ppf_distance_step = 0.003;  ///< m, pair distance quantisation
   int ppf_angle_bins = 30;           ///< angle quantisation (12°) and rotation bins
   int ppf_ref_step = 4;              ///< every n-th scene point is a reference
+  /// model pairs one feature may hold; a feature shared by more (two points of one large flat
+  /// face differ only in their distance) says little about the pose and is left out of the table
+  int ppf_max_bucket = 64;
   /// best-voted poses scored on the distance field; scene points are scored in a fixed random
   /// order and a pose whose first 64 explain less than half the best pose's share stops there
   int ppf_candidates = 100;

@@ -206,7 +206,7 @@ bool ppfKey(const Vec3& p1, const Vec3& n1, const Vec3& p2, const Vec3& n2, floa
   return true;
 }
 
-PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins) {
+PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins, size_t max_bucket) {
   PpfTable t;
   t.dist_step = dist_step;
   t.angle_bins = bins;
@@ -228,7 +228,6 @@ PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins) {
   });
   // Features shared by very many pairs (two points on one large flat face differ only in their
   // distance) say little about the pose and cost most of the voting: leave them out.
-  const size_t max_bucket = std::max<size_t>(256, all.size() / 4000);
   t.entries.reserve(all.size());
   const bool dense = all.empty() || all.back().first + 2 <= PpfTable::kMaxDenseKeys;
   if (dense) t.offset.assign(all.empty() ? 1 : all.back().first + 2, 0);
@@ -460,6 +459,9 @@ std::vector<Hypothesis> ransac(const SceneData& s, const ModelMatcher::ModelInde
   std::vector<int> order(s.coarse.size());
   std::iota(order.begin(), order.end(), 0);
   std::shuffle(order.begin(), order.end(), rng);
+  // the ranking needs the share of points explained, not every point: a quarter of them, at
+  // least 300 (±3 % of the share; the screening ICP then ranks the few kept on all points)
+  order.resize(std::min(order.size(), std::max<size_t>(300, order.size() / 4)));
   const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
   const float cos_n = std::cos(0.8f);
   const float cos_tol = std::cos(static_cast<float>(cfg.normal_tolerance));
@@ -534,10 +536,12 @@ std::vector<Hypothesis> ppfVoting(const ScanCloud& scene, const ModelMatcher::Mo
   std::vector<Hypothesis> out;
   if (M == 0 || scene.size() < 2) return out;
   std::vector<int> acc(M * bins);
+  std::vector<uint32_t> touched;  // cells voted for by the current reference (reset after it)
   const float max_d2 = m.diameter * m.diameter;
   const float to_bin = bins / static_cast<float>(2 * M_PI);
   for (size_t r = 0; r < scene.size(); r += static_cast<size_t>(std::max(1, ref_step))) {
-    std::fill(acc.begin(), acc.end(), 0);
+    for (uint32_t k : touched) acc[k] = 0;
+    touched.clear();
     const Vec3 &pr = scene.points[r], &nr = scene.normals[r];
     const Eigen::Isometry3f Ls = toLocalFrame(pr, nr);
     // the running maximum (lowest cell on ties, as a scan would find it) instead of a scan
@@ -558,6 +562,7 @@ std::vector<Hypothesis> ppfVoting(const ScanCloud& scene, const ModelMatcher::Mo
         if (b >= bins) b -= bins;
         const size_t k = static_cast<size_t>(t.entries[e].cell) + static_cast<size_t>(b);
         const int v = ++acc[k];
+        if (v == 1) touched.push_back(static_cast<uint32_t>(k));
         if (v > best || (v == best && k < best_k)) {
           best = v;
           best_k = k;
@@ -593,6 +598,9 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   std::iota(order.begin(), order.end(), 0);
   std::mt19937_64 rng(cfg.seed);
   std::shuffle(order.begin(), order.end(), rng);
+  // the ranking needs the share of points explained, not every point: a quarter of them, at
+  // least 300 (±3 % of the share; the screening ICP then ranks the few kept on all points)
+  order.resize(std::min(order.size(), std::max<size_t>(300, order.size() / 4)));
   const int probe = std::min<int>(64, static_cast<int>(order.size()));
   int best_score = 0;
   const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
@@ -879,8 +887,11 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
       rows.push_back({q, n, n.dot(q - mp), -1, false});
     }
     if (rows.size() < 6) break;
-    res.resize(rows.size());
-    for (size_t i = 0; i < rows.size(); ++i) res[i] = std::abs(rows[i].r);
+    // robust scale from the median absolute residual (of at most ~256 evenly spread rows: it
+    // sets the Huber scale and the next correspondence distance, a few per cent do not matter)
+    const size_t every = std::max<size_t>(1, rows.size() / 256);
+    res.clear();
+    for (size_t i = 0; i < rows.size(); i += every) res.push_back(std::abs(rows[i].r));
     std::nth_element(res.begin(), res.begin() + res.size() / 2, res.end());
     const double sigma = std::max(1.4826 * res[res.size() / 2], 1e-5);
     // Huber scale from the residuals, but not below the floor: with a clean scan sigma is a few
@@ -892,10 +903,14 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
       const double w = std::abs(row.r) <= huber ? 1.0 : huber / std::abs(row.r);
       Eigen::Matrix<double, 6, 1> J;
       J << row.q.cross(row.n), row.n;
-      A += w * J * J.transpose();
+      for (int i = 0; i < 6; ++i) {  // upper triangle only (A is symmetric)
+        const double wi = w * J[i];
+        for (int j = i; j < 6; ++j) A(i, j) += wi * J[j];
+      }
       b -= w * J * row.r;
       ss += row.r * row.r;
     }
+    A.triangularView<Eigen::StrictlyLower>() = A.transpose();
     rmse = std::sqrt(ss / rows.size());
     // Degeneracy-aware step: directions the data do not constrain (a U-profile seen from
     // above says nothing along its extrusion; exact face normals make that exactly singular)
@@ -1223,7 +1238,8 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
   }
   if (config_.coarse == "ppf") {
     m->ppf_cloud = thinned(*m->coarse, config_.ppf_sampling);
-    m->ppf = buildPpf(m->ppf_cloud, static_cast<float>(config_.ppf_distance_step), config_.ppf_angle_bins);
+    m->ppf = buildPpf(m->ppf_cloud, static_cast<float>(config_.ppf_distance_step), config_.ppf_angle_bins,
+                      static_cast<size_t>(config_.ppf_max_bucket));
   } else {
     m->fpfh = computeFpfh(*m->coarse, config_.feature_radius);
     std::vector<Fpfh> valid;
@@ -1444,6 +1460,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   if (c.ppf_angle_bins < 4 || c.ppf_angle_bins > 255) m.fail("ppf_angle_bins", "must be in [4, 255]");
   c.ppf_ref_step = m.getInt("ppf_ref_step", c.ppf_ref_step);
   if (c.ppf_ref_step < 1) m.fail("ppf_ref_step", "must be >= 1");
+  atLeast("ppf_max_bucket", c.ppf_max_bucket, 1);
   atLeast("ppf_candidates", c.ppf_candidates, 1);
   atLeast("max_iterations", c.max_iterations, 1);
   c.confidence = m.getDouble("confidence", c.confidence);

@@ -203,6 +203,8 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("fitnes_radius"), std::string::npos);
   std::ofstream(path) << "min_fitness: 1.5\n";
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("min_fitness"), std::string::npos);
+  std::ofstream(path) << "ppf_max_bucket: 0\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("ppf_max_bucket"), std::string::npos);
 }
 
 // Real data (../shared/data/pointclouds): a reference scan as the model (thesis: "CAD mesh or
