@@ -459,9 +459,6 @@ std::vector<Hypothesis> ransac(const SceneData& s, const ModelMatcher::ModelInde
   std::vector<int> order(s.coarse.size());
   std::iota(order.begin(), order.end(), 0);
   std::shuffle(order.begin(), order.end(), rng);
-  // the ranking needs the share of points explained, not every point: a quarter of them, at
-  // least 300 (±3 % of the share; the screening ICP then ranks the few kept on all points)
-  order.resize(std::min(order.size(), std::max<size_t>(300, order.size() / 4)));
   const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
   const float cos_n = std::cos(0.8f);
   const float cos_tol = std::cos(static_cast<float>(cfg.normal_tolerance));
