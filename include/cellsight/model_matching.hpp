@@ -38,8 +38,9 @@ struct MatchingConfig {
   /// model pairs one feature may hold; a feature shared by more (two points of one large flat
   /// face differ only in their distance) says little about the pose and is left out of the table
   int ppf_max_bucket = 64;
-  /// best-voted poses scored on the distance field; scene points are scored in a fixed random
-  /// order and a pose whose first 64 explain less than half the best pose's share stops there
+  /// best-voted poses scored on the distance field, on a quarter of the scene points (at least
+  /// 300) in a fixed random order; a pose whose first 64 explain less than half the best pose's
+  /// share stops there
   int ppf_candidates = 100;
   int max_iterations = 100000;     ///< RANSAC hypotheses at most
   double confidence = 0.999;       ///< adaptive RANSAC termination

@@ -884,8 +884,8 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
       rows.push_back({q, n, n.dot(q - mp), -1, false});
     }
     if (rows.size() < 6) break;
-    // robust scale from the median absolute residual (of at most ~256 evenly spread rows: it
-    // sets the Huber scale and the next correspondence distance, a few per cent do not matter)
+    // robust scale from the median absolute residual of every k-th row (256–511 rows: it sets
+    // the Huber scale and the next correspondence distance, where a few per cent do not matter)
     const size_t every = std::max<size_t>(1, rows.size() / 256);
     res.clear();
     for (size_t i = 0; i < rows.size(); i += every) res.push_back(std::abs(rows[i].r));
