@@ -32,9 +32,9 @@
 #include <numeric>
 #include <random>
 
-#include "cellsight/fgr.hpp"
-#include "cellsight/localization_eval.hpp"
-#include "cellsight/model_matching.hpp"
+#include "cellsight/localization/fgr.hpp"
+#include "cellsight/localization/localization_eval.hpp"
+#include "cellsight/localization/model_matching.hpp"
 
 using namespace cellsight;
 using json = nlohmann::json;

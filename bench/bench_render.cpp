@@ -4,8 +4,8 @@
 
 #include <opencv2/core.hpp>
 
-#include "cellsight/renderer.hpp"
-#include "cellsight/trajectory.hpp"
+#include "cellsight/sim/renderer.hpp"
+#include "cellsight/common/trajectory.hpp"
 
 namespace {
 

@@ -6,9 +6,9 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 
-#include "cellsight/renderer.hpp"
-#include "cellsight/sim_scan.hpp"
-#include "cellsight/trajectory.hpp"
+#include "cellsight/sim/renderer.hpp"
+#include "cellsight/eval/sim_scan.hpp"
+#include "cellsight/common/trajectory.hpp"
 
 namespace {
 

@@ -2,8 +2,8 @@
 # make demo: install what is missing, build, run the simulated cell cycle headless.
 # Writes to <out>: images/ (captured frames), frames.json, truth/ (ground truth + true
 # calibration), raw.bag (images, camera_info, tf, I/O), scan.ply, scanner.json, rviz.png,
-# report.json.
-# Usage: scripts/demo.sh [build folder] [out folder]
+# report.json, image_bytes.json (bytes of the camera frames sent between processes).
+# Usage: scripts/demo.sh [build folder] [out folder]   (DEMO_LAUNCH_ARGS="nodelets:=false" adds launch args)
 set -euo pipefail
 BUILD=${1:-_build}
 OUT=${2:-out/demo}
@@ -33,7 +33,7 @@ trap cleanup EXIT
 start_xvfb
 echo "demo: simulated cell on $ROS_MASTER_URI, display $DISPLAY, output in $OUT"
 t3=$(now)
-roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$OUT" rviz:=true \
+roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$OUT" rviz:=true ${DEMO_LAUNCH_ARGS:-} \
   >"$OUT/launch.log" 2>&1 &
 LAUNCH_PID=$!
 
@@ -64,6 +64,10 @@ while [ ! -f "$OUT/detections_raw.json" ]; do
 done
 sleep 3  # let rviz draw the last frame
 screenshot "$OUT/rviz.png"
+# What the 2 MP frames cost between processes (nodelets pass them by pointer inside the manager).
+FRAMES=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["frames"])' "$OUT/scan_result.json")
+/usr/bin/python3 scripts/topic-bytes.py /scanner_camera/image_raw --frames "$FRAMES" >"$OUT/image_bytes.json" \
+  || echo "demo: warning: could not read the image topic's bus statistics" >&2
 kill -INT "$LAUNCH_PID"
 wait "$LAUNCH_PID" || true
 LAUNCH_PID=""
@@ -152,6 +156,12 @@ det_path = os.path.join(out, "detections.json")
 if os.path.exists(det_path):
     det = json.load(open(det_path))
     report["localization"] = {k: det[k] for k in ("tp", "fp", "fn", "median_t_err_mm", "median_r_err_deg", "locate_seconds")}
+ib_path = os.path.join(out, "image_bytes.json")
+if os.path.exists(ib_path):
+    ib = json.load(open(ib_path))
+    report["image_transport"] = {"bytes_sent_per_frame": ib.get("bytes_sent_per_frame"),
+                                 "subscribers": ib.get("subscribers"),
+                                 "publishers": ib.get("publishers")}
 write_json("report.json", report)
 print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds", "clustering", "localization") if k in report}, indent=1))
 print(json.dumps({k: v for k, v in scanner.items() if k not in ("notes", "sphere_in_scan")}, indent=1))

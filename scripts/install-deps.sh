@@ -9,12 +9,14 @@ PACKAGES=(
   # build tools
   build-essential cmake pkg-config ccache googletest libgtest-dev libbenchmark-dev
   # ROS 1 (Debian's own packaging, under /usr)
-  catkin ros-message-generation ros-message-runtime libroscpp-dev
+  catkin catkin-lint python3-rosdep2 ros-message-generation ros-message-runtime libroscpp-dev
   libtf2-ros-dev libtf2-eigen-dev libtf2-geometry-msgs-dev ros-tf2-msgs
   libsensor-msgs-dev libgeometry-msgs-dev libvisualization-msgs-dev libstd-msgs-dev libstd-srvs-dev
   ros-std-msgs ros-std-srvs ros-geometry-msgs ros-sensor-msgs ros-visualization-msgs ros-rosgraph-msgs
   libactionlib-dev libactionlib-msgs-dev ros-actionlib-msgs python3-actionlib
-  libcv-bridge-dev libimage-transport-dev
+  libcv-bridge-dev libimage-transport-dev libdiagnostic-updater-dev libdiagnostic-msgs-dev ros-diagnostic-msgs
+  libnodeletlib-dev libnodeletlib-tools libnodelet-dev pluginlib-dev
+  libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
   librosbag-dev python3-rosbag librostest-dev python3-rostest python3-roslaunch python3-rosmaster rosout
   rosbash python3-rostopic python3-rosservice python3-rosnode python3-rosparam
   python3-rospy python3-sensor-msgs python3-geometry-msgs python3-tf2-ros python3-nose python3-yaml
@@ -22,8 +24,11 @@ PACKAGES=(
   # core libraries
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libembree-dev libtbb-dev
   libqrencode-dev libzbar-dev libpcl-dev libpcl-conversions-dev libopen3d-dev
+  libcli11-dev gnuplot-nox libassimp-dev
   # headless rviz screenshots
   xvfb x11-utils imagemagick libgl1-mesa-dri mesa-utils
+  # the two-PC test: roslaunch reaches the second "PC" by ssh
+  openssh-server python3-paramiko
 )
 
 missing=()

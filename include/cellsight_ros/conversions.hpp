@@ -12,10 +12,10 @@
 #include <cstdint>
 #include <opencv2/core.hpp>
 
-#include "cellsight/calibration.hpp"
-#include "cellsight/camera_model.hpp"
-#include "cellsight/plane.hpp"
-#include "cellsight/scan_cloud.hpp"
+#include "cellsight/common/calibration.hpp"
+#include "cellsight/common/camera_model.hpp"
+#include "cellsight/common/plane.hpp"
+#include "cellsight/common/scan_cloud.hpp"
 #include "cellsight/LaserPlaneStamped.h"
 
 namespace cellsight_ros {

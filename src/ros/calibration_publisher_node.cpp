@@ -6,17 +6,26 @@
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 
-#include "cellsight/calibration.hpp"
-#include "cellsight/errors.hpp"
+#include "cellsight/common/calibration.hpp"
+#include "cellsight/common/errors.hpp"
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
+#include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
+
+#include <ctime>
+#include <mutex>
 
 namespace {
 
 class CalibrationPublisher {
  public:
-  CalibrationPublisher(ros::NodeHandle&, ros::NodeHandle& pnh) {
+  CalibrationPublisher(ros::NodeHandle& nh, ros::NodeHandle& pnh)
+      : diag_(nh, pnh, "calibration_publisher", "calibration loads", 2.0) {
+    diag_.addValue("oldest calibration age [days]", [this] {
+      std::lock_guard<std::mutex> lock(mutex_);
+      return oldest_ > 0 ? std::to_string((std::time(nullptr) - oldest_) / 86400.0) : std::string("unknown");
+    });
     folder_ = cellsight_ros::requireParam<std::string>(
         pnh, "calibration_dir", "folder of calibration YAML files, e.g. config/calibration");
     double wait_seconds = 0.0;
@@ -55,6 +64,20 @@ class CalibrationPublisher {
       ROS_INFO("calibration_publisher: camera intrinsics %s are valid", f.c_str());
     }
     broadcaster_.sendTransform(msgs);
+    std::time_t oldest = 0;
+    for (const auto& [file, cal] : set.transforms) {
+      diag_.set(cal.parent_frame + " -> " + cal.child_frame, file + ", " + (cal.date.empty() ? "undated" : cal.date));
+      std::tm tm{};
+      if (!cal.date.empty() && strptime(cal.date.c_str(), "%Y-%m-%dT%H:%M:%S", &tm)) {
+        const std::time_t t = timegm(&tm);
+        if (oldest == 0 || t < oldest) oldest = t;
+      }
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      oldest_ = oldest;
+    }
+    diag_.processed();
   }
 
   bool onReload(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
@@ -66,10 +89,14 @@ class CalibrationPublisher {
       res.success = false;
       res.message = std::string("reload refused, previous calibration kept: ") + e.what();
       ROS_ERROR("calibration_publisher: %s", res.message.c_str());
+      diag_.dropped("reload refused (bad calibration file)");
     }
     return true;
   }
 
+  cellsight_ros::NodeDiagnostics diag_;
+  std::mutex mutex_;
+  std::time_t oldest_ = 0;  // date of the oldest loaded calibration
   std::string folder_;
   tf2_ros::StaticTransformBroadcaster broadcaster_;
   ros::ServiceServer reload_srv_;
@@ -77,6 +104,4 @@ class CalibrationPublisher {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  return cellsight_ros::runNode<CalibrationPublisher>(argc, argv, "calibration_publisher");
-}
+CELLSIGHT_NODE(CalibrationPublisher, "calibration_publisher", 1)

@@ -7,6 +7,7 @@
 // finishes the cloud (scan/finish). Frames may also be saved as PNG with frames.json.
 #include <actionlib/server/simple_action_server.h>
 #include <cv_bridge/cv_bridge.h>
+#include <image_transport/image_transport.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
@@ -24,11 +25,11 @@
 #include "cellsight/FinishScan.h"
 #include "cellsight/MoveFlange.h"
 #include "cellsight/ScanAction.h"
-#include "cellsight/file_io.hpp"
-#include "cellsight/ground_truth.hpp"
-#include "cellsight/trajectory.hpp"
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/common/trajectory.hpp"
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
+#include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -39,7 +40,7 @@ using Poses = std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Iso
 class CameraTrigger {
  public:
   CameraTrigger(ros::NodeHandle& nh, ros::NodeHandle& pnh)
-      : nh_(nh), tf_listener_(tf_buffer_), server_(nh, "scan", false) {
+      : nh_(nh), diag_(nh, pnh, "camera_trigger", "frames"), tf_listener_(tf_buffer_), server_(nh, "scan", false) {
     trajectory_file_ = cellsight_ros::requireParam<std::string>(
         pnh, "trajectory_file", "YAML of named trajectories, e.g. config/trajectories.yaml");
     trajectories_ = cellsight::loadTrajectories(trajectory_file_);  // validated at start-up
@@ -55,7 +56,7 @@ class CameraTrigger {
     finish_client_ = nh.serviceClient<cellsight::FinishScan>("scan/finish");
     capture_done_pub_ = nh.advertise<std_msgs::Bool>("io/capture_done", 10, true);
     in_position_sub_ = nh.subscribe("io/in_position", 10, &CameraTrigger::onInPosition, this);
-    image_sub_ = nh.subscribe("scanner_camera/image_raw", 5, &CameraTrigger::onImage, this);
+    image_sub_ = image_transport::ImageTransport(nh).subscribe("scanner_camera/image_raw", 5, &CameraTrigger::onImage, this);
     server_.registerGoalCallback([this] { onGoal(); });
     server_.start();
     ROS_INFO("camera_trigger: Scan action ready on %s (%zu named trajectories)",
@@ -72,6 +73,7 @@ class CameraTrigger {
       result.status = ScanResult::PROCESSING_FAILED;
       result.message = e.what();
     }
+    diag_.set("last scan", result.message);
     if (result.status == ScanResult::OK) {
       ROS_INFO("camera_trigger: %s", result.message.c_str());
       server_.setSucceeded(result, result.message);
@@ -357,6 +359,7 @@ class CameraTrigger {
     } catch (const tf2::TransformException& e) {
       ROS_ERROR("camera_trigger: frame %d dropped: no %s -> %s at the image stamp %.6f: %s", index,
                 base_frame_.c_str(), flange_frame_.c_str(), image->header.stamp.toSec(), e.what());
+      diag_.dropped("no flange pose at the image stamp");
       return false;
     }
     nlohmann::json entry;
@@ -372,6 +375,7 @@ class CameraTrigger {
         cv = cv_bridge::toCvShare(image);
       } catch (const cv_bridge::Exception& e) {
         ROS_ERROR("camera_trigger: frame %d has an unusable encoding '%s': %s", index, image->encoding.c_str(), e.what());
+        diag_.dropped("unusable image encoding");
         return false;
       }
       cv::Mat out = cv->image;
@@ -380,11 +384,13 @@ class CameraTrigger {
       std::snprintf(name, sizeof(name), "images/frame_%04d.png", index);
       if (!cv::imwrite(save_dir_ + "/" + name, out)) {
         ROS_ERROR("camera_trigger: cannot write %s/%s", save_dir_.c_str(), name);
+        diag_.dropped("image not written");
         return false;
       }
       entry["image"] = name;
     }
     frames_.push_back(entry);
+    diag_.processed();
     return true;
   }
 
@@ -399,6 +405,7 @@ class CameraTrigger {
   }
 
   ros::NodeHandle nh_;
+  cellsight_ros::NodeDiagnostics diag_;
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_;
   actionlib::SimpleActionServer<cellsight::ScanAction> server_;
@@ -408,7 +415,8 @@ class CameraTrigger {
   double in_position_timeout_ = 5.0, capture_timeout_ = 3.0, tf_timeout_ = 0.5, processing_timeout_ = 30.0;
   ros::ServiceClient move_client_, reset_client_, finish_client_;
   ros::Publisher capture_done_pub_;
-  ros::Subscriber in_position_sub_, image_sub_;
+  ros::Subscriber in_position_sub_;
+  image_transport::Subscriber image_sub_;
   std::mutex mutex_;
   std::condition_variable cv_;
   bool in_position_ = false;
@@ -421,7 +429,5 @@ class CameraTrigger {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  // The goal callback runs the whole scan; the I/O and image callbacks need threads of their own.
-  return cellsight_ros::runNode<CameraTrigger>(argc, argv, "camera_trigger", 3);
-}
+// The goal callback runs the whole scan; the I/O and image callbacks need threads of their own.
+CELLSIGHT_NODE(CameraTrigger, "camera_trigger", 3)

@@ -16,11 +16,12 @@
 #include <mutex>
 
 #include "cellsight/MoveFlange.h"
-#include "cellsight/ground_truth.hpp"
-#include "cellsight/renderer.hpp"
-#include "cellsight/scene.hpp"
+#include "cellsight/sim/ground_truth.hpp"
+#include "cellsight/sim/renderer.hpp"
+#include "cellsight/sim/scene.hpp"
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
+#include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -29,7 +30,7 @@ using cellsight::MoveFlange;
 
 class CellSim {
  public:
-  CellSim(ros::NodeHandle& nh, ros::NodeHandle& pnh) : it_(nh) {
+  CellSim(ros::NodeHandle& nh, ros::NodeHandle& pnh) : diag_(nh, pnh, "cell_sim", "scanner frames"), it_(nh) {
     std::string scene_file = cellsight_ros::requireParam<std::string>(
         pnh, "scene", "path of the scene YAML, e.g. $(find cellsight)/config/scenes/demo.yaml");
     cellsight::Scene scene = cellsight::loadScene(scene_file);
@@ -210,6 +211,7 @@ class CellSim {
     auto info = boost::make_shared<sensor_msgs::CameraInfo>(
         cellsight_ros::toCameraInfo(s.scanner_camera.intrinsics, s.scanner_camera.frame_id, stamp));
     scanner_pub_.publish(img, info);
+    diag_.processed(ms * 1e-3);
     plane_pub_.publish(cellsight_ros::toPlaneMsg(plane, s.scanner_camera.frame_id, stamp));
     if (frames_truth_.is_open()) {
       frames_truth_ << cellsight::frameTruthJsonLine(frame_count_, cellsight_ros::toNanoseconds(stamp),
@@ -314,6 +316,7 @@ class CellSim {
     markers_pub_.publish(arr);
   }
 
+  cellsight_ros::NodeDiagnostics diag_;
   image_transport::ImageTransport it_;
   std::shared_ptr<const cellsight::CellGeometry> geometry_;
   std::unique_ptr<cellsight::ScannerRenderer> scanner_;
@@ -340,7 +343,5 @@ class CellSim {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  // Rendering must not stall the flange tf or the I/O.
-  return cellsight_ros::runNode<CellSim>(argc, argv, "cell_sim", 3);
-}
+// Rendering must not stall the flange tf or the I/O.
+CELLSIGHT_NODE(CellSim, "cell_sim", 3)

@@ -4,9 +4,10 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include "cellsight/ClusterArray.h"
-#include "cellsight/clustering.hpp"
+#include "cellsight/localization/clustering.hpp"
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
+#include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -21,7 +22,7 @@ geometry_msgs::Point point(const Eigen::Vector3f& p) {
 
 class Clustering {
  public:
-  Clustering(ros::NodeHandle& nh, ros::NodeHandle& pnh) {
+  Clustering(ros::NodeHandle& nh, ros::NodeHandle& pnh) : diag_(nh, pnh, "clustering", "scans") {
     config_ = cellsight::loadClusteringConfig(cellsight_ros::requireParam<std::string>(
         pnh, "settings_file", "clustering settings YAML, e.g. $(find cellsight)/config/clustering.yaml"));
     clusters_pub_ = nh.advertise<cellsight::ClusterArray>("clusters", 1, true);
@@ -31,6 +32,7 @@ class Clustering {
 
  private:
   void onCloud(const sensor_msgs::PointCloud2ConstPtr& msg) {
+    const ros::WallTime t0 = ros::WallTime::now();
     try {
       size_t dropped = 0;
       const cellsight::ScanCloud cloud = cellsight_ros::fromCloudMsg(*msg, &dropped);
@@ -48,11 +50,13 @@ class Clustering {
       markers.markers.push_back(clear);
       int id = 0;
       for (const auto& c : r.clusters) {
-        out.clouds.push_back(cellsight_ros::toCloudMsg(c.cloud, msg->header.stamp));
-        out.clouds.back().header.frame_id = msg->header.frame_id;
-        out.centroids.push_back(point(c.centroid));
-        out.box_min.push_back(point(c.box.min()));
-        out.box_max.push_back(point(c.box.max()));
+        cellsight::Cluster cm;
+        cm.cloud = cellsight_ros::toCloudMsg(c.cloud, msg->header.stamp);
+        cm.cloud.header.frame_id = msg->header.frame_id;
+        cm.centroid = point(c.centroid);
+        cm.box_min = point(c.box.min());
+        cm.box_max = point(c.box.max());
+        out.clusters.push_back(std::move(cm));
         visualization_msgs::Marker m;
         m.header = msg->header;
         m.ns = "clusters";
@@ -73,11 +77,15 @@ class Clustering {
       for (const auto& w : r.warnings) ROS_WARN("clustering: %s", w.c_str());
       ROS_INFO("clustering: %zu points -> %zu clusters%s", r.input_points, r.clusters.size(),
                r.plane_found ? " (support plane removed)" : "");
+      diag_.processed((ros::WallTime::now() - t0).toSec());
+      diag_.set("clusters in the last scan", std::to_string(r.clusters.size()));
     } catch (const std::exception& e) {
       ROS_ERROR("clustering: scan at %.3f skipped: %s", msg->header.stamp.toSec(), e.what());
+      diag_.dropped("unusable scan cloud");
     }
   }
 
+  cellsight_ros::NodeDiagnostics diag_;
   cellsight::ClusteringConfig config_;
   ros::Publisher clusters_pub_, markers_pub_;
   ros::Subscriber cloud_sub_;
@@ -85,6 +93,4 @@ class Clustering {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  return cellsight_ros::runNode<Clustering>(argc, argv, "clustering");
-}
+CELLSIGHT_NODE(Clustering, "clustering", 1)

@@ -12,6 +12,7 @@
 
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
+#include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -19,7 +20,7 @@ namespace {
 class LaserPlaneTracker {
  public:
   LaserPlaneTracker(ros::NodeHandle& nh, ros::NodeHandle& pnh)
-      : listener_(buffer_), info_sub_(nh, "scanner_camera/camera_info", 20),
+      : diag_(nh, pnh, "laser_plane_tracker", "frames"), listener_(buffer_), info_sub_(nh, "scanner_camera/camera_info", 20),
         filter_(info_sub_, buffer_, "laser", 50, nh) {
     cellsight_ros::param(pnh, "laser_frame", laser_frame_);
     double tolerance = 0.0;
@@ -30,6 +31,8 @@ class LaserPlaneTracker {
     filter_.registerFailureCallback(
         [this](const sensor_msgs::CameraInfoConstPtr& msg, tf2_ros::filter_failure_reasons::FilterFailureReason reason) {
           ++dropped_;
+          diag_.dropped(reason == tf2_ros::filter_failure_reasons::OutTheBack ? "older than the tf buffer"
+                                                                               : "no laser transform at the frame's stamp");
           ROS_WARN_THROTTLE(2.0,
                             "laser_plane_tracker: frame at %.6f dropped: no transform %s -> %s at its "
                             "stamp (%s; %lu dropped so far). Is the robot publishing %s in tf and "
@@ -48,11 +51,14 @@ class LaserPlaneTracker {
       const auto T = buffer_.lookupTransform(msg->header.frame_id, laser_frame_, msg->header.stamp);
       const cellsight::Plane plane = cellsight::laserPlane(cellsight_ros::fromTransformMsg(T.transform));
       plane_pub_.publish(cellsight_ros::toPlaneMsg(plane, msg->header.frame_id, msg->header.stamp));
+      diag_.processed();
     } catch (const std::exception& e) {
       ROS_WARN_THROTTLE(2.0, "laser_plane_tracker: frame at %.6f dropped: %s", msg->header.stamp.toSec(), e.what());
+      diag_.dropped("bad laser transform");
     }
   }
 
+  cellsight_ros::NodeDiagnostics diag_;
   std::string laser_frame_ = "laser";
   tf2_ros::Buffer buffer_;
   tf2_ros::TransformListener listener_;
@@ -64,6 +70,4 @@ class LaserPlaneTracker {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  return cellsight_ros::runNode<LaserPlaneTracker>(argc, argv, "laser_plane_tracker");
-}
+CELLSIGHT_NODE(LaserPlaneTracker, "laser_plane_tracker", 1)

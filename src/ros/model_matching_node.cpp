@@ -1,8 +1,10 @@
 // model_matching: clusters (cellsight/ClusterArray) → detections (cellsight/DetectionArray, one
-// message per scan), tf frames object/<n> at the scan's stamp, mesh markers for rviz, and the
+// message per scan), tf frames object/<model>_<k> (names kept across scans for a part found again
+// where it was; re-published at ~frame_rate so tf never runs out of them), mesh markers for rviz, and the
 // ~locate_objects service (cellsight/LocateObjects) on the latest clusters. The viewpoint of the
 // visible-surface check is the scanner camera, looked up in tf at the clusters' stamp; without
 // that transform the clusters are dropped with the reason (never an identity).
+#include <dynamic_reconfigure/server.h>
 #include <geometry_msgs/TransformStamped.h>
 #include <ros/ros.h>
 #include <tf2_eigen/tf2_eigen.h>
@@ -22,17 +24,21 @@
 #include "cellsight/ClusterArray.h"
 #include "cellsight/DetectionArray.h"
 #include "cellsight/LocateObjects.h"
-#include "cellsight/file_io.hpp"
-#include "cellsight/model_matching.hpp"
+#include "cellsight/MatchingAcceptanceConfig.h"
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/localization/instance_names.hpp"
+#include "cellsight/localization/model_matching.hpp"
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
+#include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
 
 class ModelMatching {
  public:
-  ModelMatching(ros::NodeHandle& nh, ros::NodeHandle& pnh) : listener_(buffer_) {
+  ModelMatching(ros::NodeHandle& nh, ros::NodeHandle& pnh)
+      : diag_(nh, pnh, "model_matching", "scans"), listener_(buffer_) {
     const std::string settings = cellsight_ros::requireParam<std::string>(
         pnh, "settings_file", "matching settings YAML, e.g. $(find cellsight)/config/matching.yaml");
     const std::string models = cellsight_ros::requireParam<std::string>(
@@ -40,6 +46,9 @@ class ModelMatching {
     cellsight_ros::param(pnh, "camera_frame", camera_frame_);
     cellsight_ros::param(pnh, "output_file", output_file_);
     cellsight_ros::param(pnh, "tf_timeout", tf_timeout_);
+    double frame_rate = 10.0;
+    cellsight_ros::param(pnh, "frame_rate", frame_rate);
+    cellsight_ros::param(pnh, "instance_max_move", instance_max_move_);
     library_ = std::make_shared<const cellsight::ModelLibrary>(models);
     for (const auto& id : library_->ids()) {
       for (const auto& w : library_->model(id).warnings) ROS_WARN("model_matching: model '%s': %s", id.c_str(), w.c_str());
@@ -67,9 +76,37 @@ class ModelMatching {
     markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("detections/markers", 1, true);
     clusters_sub_ = nh.subscribe("clusters", 1, &ModelMatching::onClusters, this);
     service_ = pnh.advertiseService("locate_objects", &ModelMatching::onLocate, this);
+    // the settings file's acceptance thresholds are the starting values of ~ (rqt_reconfigure)
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<cellsight::MatchingAcceptanceConfig>>(reconfigure_mutex_, pnh);
+    const cellsight::AcceptanceThresholds t = cellsight::acceptanceOf(matcher_->config());
+    cellsight::MatchingAcceptanceConfig start;
+    start.min_fitness = t.min_fitness;
+    start.min_coverage = t.min_coverage;
+    start.max_rmse = t.max_rmse;
+    start.max_instances = t.max_instances;
+    reconfigure_->updateConfig(start);
+    reconfigure_->setCallback([this](cellsight::MatchingAcceptanceConfig& c, uint32_t) { onReconfigure(c); });
+    if (frame_rate > 0) frame_timer_ = nh.createTimer(ros::Duration(1.0 / frame_rate), &ModelMatching::onFrameTimer, this);
   }
 
  private:
+  /// New acceptance thresholds, checked like config/matching.yaml; refused ones are logged and
+  /// the running values sent back. Callbacks are serial (one spinner thread): no locate() runs.
+  void onReconfigure(cellsight::MatchingAcceptanceConfig& c) {
+    try {
+      matcher_->setAcceptance({c.min_fitness, c.min_coverage, c.max_rmse, c.max_instances});
+      ROS_INFO("model_matching: acceptance now min_fitness %.2f, min_coverage %.2f, max_rmse %.2f mm, max_instances %d",
+               c.min_fitness, c.min_coverage, c.max_rmse * 1e3, c.max_instances);
+    } catch (const std::exception& e) {
+      ROS_ERROR("model_matching: reconfigure refused: %s; the running thresholds stay", e.what());
+      const cellsight::AcceptanceThresholds t = cellsight::acceptanceOf(matcher_->config());
+      c.min_fitness = t.min_fitness;
+      c.min_coverage = t.min_coverage;
+      c.max_rmse = t.max_rmse;
+      c.max_instances = t.max_instances;
+    }
+  }
+
   void onClusters(const cellsight::ClusterArrayConstPtr& msg) {
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -79,6 +116,7 @@ class ModelMatching {
     std::string why;
     if (!locate(*msg, {}, &out, &why)) {
       ROS_ERROR("model_matching: clusters at %.3f dropped: %s", msg->header.stamp.toSec(), why.c_str());
+      diag_.dropped("no scanner camera transform at the scan's stamp");
       return;
     }
     publish(out);
@@ -90,14 +128,15 @@ class ModelMatching {
       std::lock_guard<std::mutex> lock(mutex_);
       clusters = latest_;
     }
+    using Res = cellsight::LocateObjects::Response;
     if (!clusters) {
-      res.success = false;
+      res.status = Res::NO_CLUSTERS;
       res.message = "no clusters received yet on " + clusters_sub_.getTopic() + ": scan first";
       return true;
     }
     for (const auto& id : req.models) {
       if (!library_->has(id)) {
-        res.success = false;
+        res.status = Res::UNKNOWN_MODEL;
         std::string known;
         for (const auto& k : library_->ids()) known += " " + k;
         res.message = "unknown model '" + id + "' (known:" + known + ")";
@@ -105,9 +144,10 @@ class ModelMatching {
       }
     }
     std::string why;
-    res.success = locate(*clusters, req.models, &res.detections, &why);
-    res.message = res.success ? std::to_string(res.detections.detections.size()) + " detections" : why;
-    if (res.success) publish(res.detections);
+    const bool ok = locate(*clusters, req.models, &res.detections, &why);
+    res.status = ok ? Res::OK : Res::NO_TRANSFORM;
+    res.message = ok ? std::to_string(res.detections.detections.size()) + " detections" : why;
+    if (ok) publish(res.detections);
     return true;
   }
 
@@ -123,9 +163,9 @@ class ModelMatching {
       return false;
     }
     std::vector<cellsight::ScanCloud> clusters;
-    for (const auto& c : msg.clouds) {
+    for (const auto& c : msg.clusters) {
       try {
-        clusters.push_back(cellsight_ros::fromCloudMsg(c));
+        clusters.push_back(cellsight_ros::fromCloudMsg(c.cloud));
       } catch (const std::exception& e) {
         out->warnings.push_back(std::string("a cluster cloud was unreadable: ") + e.what());
         clusters.emplace_back();
@@ -140,12 +180,21 @@ class ModelMatching {
     out->header = msg.header;
     out->clusters = static_cast<uint32_t>(clusters.size());
     out->locate_seconds = stats.seconds;
+    diag_.processed(stats.seconds);
+    diag_.set("parts found in the last scan", std::to_string(dets.size()));
     for (const auto& w : stats.warnings) out->warnings.push_back(w);
-    int n = 0;
+    std::vector<cellsight::NamedInstance> current;
+    for (const cellsight::PartDetection& d : dets) current.push_back({d.model, "", d.pose.translation()});
+    std::vector<std::string> names;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      names = cellsight::assignInstanceNames(instances_, current, instance_max_move_);
+    }
+    size_t n = 0;
     for (const cellsight::PartDetection& d : dets) {
       cellsight::Detection m;
       m.model = d.model;
-      m.name = "object/" + std::to_string(n++);
+      m.name = names[n++];
       m.pose = tf2::toMsg(d.pose);
       m.fitness = d.fitness;
       m.coverage = d.coverage;
@@ -157,8 +206,24 @@ class ModelMatching {
     return true;
   }
 
+  /// The latest detections' frames again, stamped now: tf keeps them while nothing new is scanned.
+  void onFrameTimer(const ros::TimerEvent&) {
+    std::vector<geometry_msgs::TransformStamped> frames;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      frames = frames_;
+    }
+    const ros::Time now = ros::Time::now();
+    for (auto& t : frames) {
+      if (now > t.header.stamp) t.header.stamp = now;
+      broadcaster_.sendTransform(t);
+    }
+  }
+
   void publish(const cellsight::DetectionArray& out) {
     detections_pub_.publish(out);
+    std::vector<cellsight::NamedInstance> instances;
+    std::vector<geometry_msgs::TransformStamped> frames;
     visualization_msgs::MarkerArray markers;
     visualization_msgs::Marker clear;
     clear.action = visualization_msgs::Marker::DELETEALL;
@@ -180,6 +245,8 @@ class ModelMatching {
       t.transform.translation.z = d.pose.position.z;
       t.transform.rotation = d.pose.orientation;
       broadcaster_.sendTransform(t);
+      frames.push_back(t);
+      instances.push_back({d.model, d.name, Eigen::Vector3d(d.pose.position.x, d.pose.position.y, d.pose.position.z)});
       visualization_msgs::Marker m;
       m.header = out.header;
       m.ns = "detections";
@@ -208,6 +275,11 @@ class ModelMatching {
                d.rmse * 1e3);
     }
     markers_pub_.publish(markers);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      instances_ = std::move(instances);
+      frames_ = std::move(frames);
+    }
     for (const auto& w : out.warnings) ROS_WARN("model_matching: %s", w.c_str());
     ROS_INFO("model_matching: %zu parts located in %u clusters in %.3f s", out.detections.size(), out.clusters,
              out.locate_seconds);
@@ -220,12 +292,19 @@ class ModelMatching {
     }
   }
 
+  cellsight_ros::NodeDiagnostics diag_;
   std::shared_ptr<const cellsight::ModelLibrary> library_;
   cellsight::MatchingConfig config_;
   std::unique_ptr<cellsight::ModelMatcher> matcher_;
   std::string camera_frame_ = "scanner_camera_optical";
   std::string output_file_;
   double tf_timeout_ = 0.5;
+  double instance_max_move_ = 0.05;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<cellsight::MatchingAcceptanceConfig>> reconfigure_;  // m: a part found again within this keeps its name
+  std::vector<cellsight::NamedInstance> instances_;     // the latest detections, for naming
+  std::vector<geometry_msgs::TransformStamped> frames_;  // and their tf frames, re-published
+  ros::Timer frame_timer_;
   tf2_ros::Buffer buffer_;
   tf2_ros::TransformListener listener_;
   tf2_ros::TransformBroadcaster broadcaster_;
@@ -238,6 +317,4 @@ class ModelMatching {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  return cellsight_ros::runNode<ModelMatching>(argc, argv, "model_matching");
-}
+CELLSIGHT_NODE(ModelMatching, "model_matching", 1)

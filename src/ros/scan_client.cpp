@@ -6,7 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cellsight/ScanAction.h"
-#include "cellsight/file_io.hpp"
+#include "cellsight/common/file_io.hpp"
 #include "cellsight_ros/params.hpp"
 
 int main(int argc, char** argv) {

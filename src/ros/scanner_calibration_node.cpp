@@ -1,26 +1,34 @@
 // scanner_calibration: the calibration procedures as ROS services (the same core as the
-// cellsight_calibrate tool). Each writes its YAML atomically: on any failure the previous file
+// cellsight_calibrate tool). Requests carry the data (images, camera_info, poses); responses carry
+// the result (camera_info or transform, residuals). Each result is also written atomically into
+// ~calibration_dir (the folder calibration_publisher serves): on any failure the previous file
 // stays as it was. With ~reload_publisher the calibration_publisher re-reads its folder after a
 // successful calibration.
+#include <cv_bridge/cv_bridge.h>
 #include <ros/ros.h>
+#include <sensor_msgs/image_encodings.h>
 #include <std_srvs/Trigger.h>
-
-#include <opencv2/imgcodecs.hpp>
+#include <tf2_eigen/tf2_eigen.h>
 
 #include "cellsight/CalibrateExtrinsics.h"
 #include "cellsight/CalibrateIntrinsics.h"
 #include "cellsight/CalibrateLaser.h"
-#include "cellsight/calibrate.hpp"
-#include "cellsight/calibration.hpp"
+#include "cellsight/scanner/calibrate.hpp"
+#include "cellsight/common/calibration.hpp"
+#include "cellsight/common/file_io.hpp"
+#include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
+#include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
 
 class ScannerCalibration {
  public:
-  ScannerCalibration(ros::NodeHandle& nh, ros::NodeHandle& pnh) {
+  ScannerCalibration(ros::NodeHandle& nh, ros::NodeHandle& pnh)
+      : diag_(nh, pnh, "scanner_calibration", "calibrations", 2.0) {
     cellsight_ros::param(pnh, "reload_publisher", reload_);
+    cellsight_ros::param(pnh, "calibration_dir", calibration_dir_);
     reload_client_ = nh.serviceClient<std_srvs::Trigger>("calibration_publisher/reload");
     intrinsics_ = pnh.advertiseService("intrinsics", &ScannerCalibration::onIntrinsics, this);
     extrinsics_ = pnh.advertiseService("extrinsics", &ScannerCalibration::onExtrinsics, this);
@@ -38,10 +46,14 @@ class ScannerCalibration {
         if (reload_client_.call(t) && !t.response.success) res.message += "; reload refused: " + t.response.message;
       }
       ROS_INFO("scanner_calibration: %s", res.message.c_str());
+      diag_.processed();
+      diag_.set("last calibration", res.message);
     } catch (const std::exception& e) {
       res.status = Res::FAILED;
       res.message = std::string("calibration failed, previous file kept: ") + e.what();
       ROS_ERROR("scanner_calibration: %s", res.message.c_str());
+      diag_.dropped("calibration failed");
+      diag_.set("last calibration", res.message);
     }
     return true;
   }
@@ -53,54 +65,111 @@ class ScannerCalibration {
     return {{cols, rows}, square};
   }
 
+  /// The request's image as 8-bit grey (mono8 as it is; rgb8/bgr8 converted); throws naming it.
+  static cv::Mat grey(const sensor_msgs::Image& image, const std::string& what) {
+    try {
+      return cv_bridge::toCvCopy(image, sensor_msgs::image_encodings::MONO8)->image;
+    } catch (const cv_bridge::Exception& e) {
+      throw std::invalid_argument(what + ": unusable image (encoding '" + image.encoding + "', " +
+                                  std::to_string(image.width) + "x" + std::to_string(image.height) + "): " + e.what());
+    }
+  }
+
+  /// <~calibration_dir>/<name>.yaml (the folder made when missing), or "" when the node has no
+  /// folder (results only returned).
+  std::string fileFor(const std::string& name) const {
+    if (calibration_dir_.empty()) return "";
+    cellsight::makeDirs(calibration_dir_);
+    std::string base = name;
+    for (char& ch : base)
+      if (ch == '/') ch = '_';
+    return calibration_dir_ + "/" + base + ".yaml";
+  }
+
+  static geometry_msgs::TransformStamped toMsg(const cellsight::TransformCalibration& c) {
+    geometry_msgs::TransformStamped t = tf2::eigenToTransform(c.T_parent_child);
+    t.header.frame_id = c.parent_frame;
+    t.header.stamp = ros::Time::now();
+    t.child_frame_id = c.child_frame;
+    return t;
+  }
+
   bool onIntrinsics(cellsight::CalibrateIntrinsics::Request& req, cellsight::CalibrateIntrinsics::Response& res) {
     return guarded(res, [&] {
-      if (req.output_file.empty()) throw std::invalid_argument("output_file is empty");
-      auto r = cellsight::calibrateIntrinsics(cellsight::listImages(req.images),
-                                              board(req.board_cols, req.board_rows, req.square_size),
+      if (req.images.empty()) throw std::invalid_argument("no images in the request");
+      std::vector<std::pair<std::string, cv::Mat>> views;
+      for (size_t i = 0; i < req.images.size(); ++i) {
+        const std::string name = "image " + std::to_string(i);
+        views.emplace_back(name, grey(req.images[i], name));
+      }
+      auto r = cellsight::calibrateIntrinsics(views, board(req.board_cols, req.board_rows, req.square_size),
                                               cellsight::parseDistortionModel(req.model.empty() ? "full" : req.model),
                                               req.fix_aspect_ratio);
       r.camera.camera_name = req.camera_name.empty() ? "scanner_camera" : req.camera_name;
-      cellsight::saveCameraInfoYaml(req.output_file, r.camera);
+      res.file = fileFor(r.camera.camera_name);
+      if (!res.file.empty()) cellsight::saveCameraInfoYaml(res.file, r.camera);
+      res.camera_info = cellsight_ros::toCameraInfo(r.camera, req.images.front().header.frame_id, ros::Time::now());
       res.rms_px = r.rms_px;
       res.views_used = static_cast<uint32_t>(r.used.size());
-      res.message = "intrinsics from " + std::to_string(r.used.size()) + " views, RMS " + std::to_string(r.rms_px) +
-                    " px, written to " + req.output_file;
+      res.per_view_rms_px = r.per_view_rms_px;
+      res.message = "intrinsics from " + std::to_string(r.used.size()) + " of " + std::to_string(views.size()) +
+                    " views, RMS " + std::to_string(r.rms_px) + " px" +
+                    (res.file.empty() ? " (not written: ~calibration_dir is not set)" : ", written to " + res.file);
     });
   }
 
   bool onExtrinsics(cellsight::CalibrateExtrinsics::Request& req, cellsight::CalibrateExtrinsics::Response& res) {
     return guarded(res, [&] {
-      const auto cam = cellsight::loadCameraInfoYaml(req.camera_file);
-      const cv::Mat grey = cv::imread(req.image, cv::IMREAD_GRAYSCALE);
-      if (grey.empty()) throw std::runtime_error(req.image + ": cannot read the image");
+      const cellsight::CameraIntrinsics cam = cellsight_ros::fromCameraInfo(req.camera_info);
       auto p = [](const geometry_msgs::Point& q) { return Eigen::Vector3d(q.x, q.y, q.z); };
-      const auto r = cellsight::calibrateExtrinsics(grey, board(req.board_cols, req.board_rows, req.square_size), cam,
+      for (const auto* q : {&req.origin, &req.on_x, &req.in_xy})
+        if (!p(*q).allFinite()) throw std::invalid_argument("a taught point is not finite");
+      const auto r = cellsight::calibrateExtrinsics(grey(req.image, "image"),
+                                                    board(req.board_cols, req.board_rows, req.square_size), cam,
                                                     cellsight::frameFromThreePoints(p(req.origin), p(req.on_x), p(req.in_xy)));
       cellsight::TransformCalibration c;
       c.parent_frame = req.parent_frame.empty() ? "base_link" : req.parent_frame;
-      c.child_frame = req.child_frame.empty() ? "scanner_camera_optical" : req.child_frame;
+      c.child_frame = !req.child_frame.empty()               ? req.child_frame
+                      : !req.camera_info.header.frame_id.empty() ? req.camera_info.header.frame_id
+                                                                 : "scanner_camera_optical";
       c.T_parent_child = r.T_base_camera;
       c.residual_rms = r.rms_px;
       c.method = "pattern PnP + taught pattern frame (residual: reprojection RMS px)";
       c.date = cellsight::isoDateNow();
-      cellsight::saveTransformCalibration(req.output_file, c);
+      res.file = fileFor(c.child_frame);
+      if (!res.file.empty()) cellsight::saveTransformCalibration(res.file, c);
+      res.transform = toMsg(c);
       res.rms_px = r.rms_px;
-      res.message = "camera pose written to " + req.output_file;
+      res.message = "camera pose " + c.parent_frame + " -> " + c.child_frame + ", RMS " + std::to_string(r.rms_px) +
+                    " px" + (res.file.empty() ? " (not written: ~calibration_dir is not set)" : ", written to " + res.file);
     });
   }
 
   bool onLaser(cellsight::CalibrateLaser::Request& req, cellsight::CalibrateLaser::Response& res) {
     return guarded(res, [&] {
-      const auto cam = cellsight::loadCameraInfoYaml(req.camera_file);
-      const auto pose = cellsight::loadTransformCalibration(req.camera_pose_file);
-      const auto obs = cellsight::loadLaserObservations(req.observations_file);
+      const size_t n = req.images.size();
+      if (n == 0) throw std::invalid_argument("no observations in the request");
+      if (req.flange_poses.size() != n || req.plane_z.size() != n || (!req.block_z.empty() && req.block_z.size() != n)) {
+        throw std::invalid_argument("images, flange_poses, plane_z (and block_z when given) must have one entry per "
+                                    "observation (" + std::to_string(n) + " images)");
+      }
+      const cellsight::CameraIntrinsics cam = cellsight_ros::fromCameraInfo(req.camera_info);
+      const Eigen::Isometry3d T_base_camera = tf2::transformToEigen(req.camera_pose);
+      if (!T_base_camera.matrix().allFinite()) throw std::invalid_argument("camera_pose is not finite");
+      std::vector<cellsight::LaserObservation> obs(n);
+      for (size_t i = 0; i < n; ++i) {
+        obs[i].image = grey(req.images[i], "observation " + std::to_string(i));
+        tf2::fromMsg(req.flange_poses[i], obs[i].T_base_flange);
+        if (!obs[i].T_base_flange.matrix().allFinite()) throw std::invalid_argument("flange pose " + std::to_string(i) + " is not finite");
+        obs[i].plane_z = req.plane_z[i];
+        obs[i].block_z = req.block_z.empty() ? 0.0 : req.block_z[i];
+      }
       const std::string method = req.method.empty() ? "lsq" : req.method;
       cellsight::LaserCalibrationResult r;
       if (method == "lsq") {
-        r = cellsight::calibrateLaserLeastSquares(obs, cam, pose.T_parent_child, {});
+        r = cellsight::calibrateLaserLeastSquares(obs, cam, T_base_camera, {});
       } else if (method == "three_point") {
-        r = cellsight::calibrateLaserThreePoint(obs.front(), cam, pose.T_parent_child, {});
+        r = cellsight::calibrateLaserThreePoint(obs.front(), cam, T_base_camera, {});
       } else {
         throw std::invalid_argument("method must be lsq or three_point");
       }
@@ -111,21 +180,24 @@ class ScannerCalibration {
       c.residual_rms = r.rms_m;
       c.method = method + " light-sheet calibration (residual: m)";
       c.date = cellsight::isoDateNow();
-      cellsight::saveTransformCalibration(req.output_file, c);
+      res.file = fileFor(c.child_frame);
+      if (!res.file.empty()) cellsight::saveTransformCalibration(res.file, c);
+      res.transform = toMsg(c);
       res.rms_mm = r.rms_m * 1e3;
       res.points = static_cast<uint32_t>(r.points);
+      res.spread_ratio = r.spread_ratio;
       res.message = "light sheet from " + std::to_string(r.points) + " points, RMS " + std::to_string(res.rms_mm) +
-                    " mm, written to " + req.output_file;
+                    " mm" + (res.file.empty() ? " (not written: ~calibration_dir is not set)" : ", written to " + res.file);
     });
   }
 
+  std::string calibration_dir_;
   bool reload_ = false;
+  cellsight_ros::NodeDiagnostics diag_;
   ros::ServiceClient reload_client_;
   ros::ServiceServer intrinsics_, extrinsics_, laser_;
 };
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  return cellsight_ros::runNode<ScannerCalibration>(argc, argv, "scanner_calibration");
-}
+CELLSIGHT_NODE(ScannerCalibration, "scanner_calibration", 1)

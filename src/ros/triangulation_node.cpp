@@ -2,6 +2,9 @@
 // (scan/profile, base frame) and the accumulated scan. scan/finish applies the statistical
 // outlier filter, the workspace crop and normals, saves PLY/PCD and publishes scan/cloud.
 #include <cv_bridge/cv_bridge.h>
+#include <dynamic_reconfigure/server.h>
+#include <image_transport/image_transport.h>
+#include <image_transport/subscriber_filter.h>
 #include <message_filters/subscriber.h>
 #include <message_filters/time_synchronizer.h>
 #include <ros/ros.h>
@@ -16,12 +19,14 @@
 #include <mutex>
 
 #include "cellsight/FinishScan.h"
-#include "cellsight/scan_cloud.hpp"
-#include "cellsight/scanner_config.hpp"
-#include "cellsight/sim_scan.hpp"
-#include "cellsight/triangulation.hpp"
+#include "cellsight/common/scan_cloud.hpp"
+#include "cellsight/scanner/scanner_config.hpp"
+#include "cellsight/eval/sim_scan.hpp"
+#include "cellsight/scanner/triangulation.hpp"
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
+#include "cellsight/ScannerLineConfig.h"
+#include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -31,7 +36,7 @@ namespace enc = sensor_msgs::image_encodings;
 class Triangulation {
  public:
   Triangulation(ros::NodeHandle& nh, ros::NodeHandle& pnh)
-      : listener_(buffer_), image_sub_(nh, "scanner_camera/image_raw", 10),
+      : diag_(nh, pnh, "triangulation", "frames"), listener_(buffer_), it_(nh), image_sub_(it_, "scanner_camera/image_raw", 10),
         plane_sub_(nh, "scan/laser_plane", 10), sync_(image_sub_, plane_sub_, 20) {
     // One strictly validated settings file (config/scanner.yaml): a typo stops the node at start.
     const std::string settings_file = cellsight_ros::requireParam<std::string>(
@@ -51,9 +56,46 @@ class Triangulation {
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/cloud", 1, true);
     reset_srv_ = nh.advertiseService("scan/reset", &Triangulation::onReset, this);
     finish_srv_ = nh.advertiseService("scan/finish", &Triangulation::onFinish, this);
+    // the settings file's thresholds are the starting values of ~ (rqt_reconfigure)
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<cellsight::ScannerLineConfig>>(reconfigure_mutex_, pnh);
+    cellsight::ScannerLineConfig start;
+    const cellsight::LineThresholds t = cellsight::lineThresholdsOf(line_);
+    start.min_contrast = t.min_contrast;
+    start.threshold_fraction = t.threshold_fraction;
+    start.max_run = t.max_run;
+    start.secondary_peak_ratio = t.secondary_peak_ratio;
+    start.min_segment = t.min_segment;
+    start.segment_max_jump = t.segment_max_jump;
+    reconfigure_->updateConfig(start);
+    reconfigure_->setCallback([this](cellsight::ScannerLineConfig& c, uint32_t) { onReconfigure(c); });
   }
 
  private:
+  /// New thresholds from dynamic_reconfigure, checked like config/scanner.yaml; refused ones are
+  /// logged and the running values sent back.
+  void onReconfigure(cellsight::ScannerLineConfig& c) {
+    const cellsight::LineThresholds t{c.min_contrast, c.threshold_fraction, c.max_run, c.secondary_peak_ratio,
+                                      c.min_segment, c.segment_max_jump};
+    const auto bad = cellsight::checkLineThresholds(t);
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!bad.first.empty()) {
+      const cellsight::LineThresholds cur = cellsight::lineThresholdsOf(line_);
+      ROS_ERROR("triangulation: reconfigure refused: %s %s; the running thresholds stay", bad.first.c_str(),
+                bad.second.c_str());
+      c.min_contrast = cur.min_contrast;
+      c.threshold_fraction = cur.threshold_fraction;
+      c.max_run = cur.max_run;
+      c.secondary_peak_ratio = cur.secondary_peak_ratio;
+      c.min_segment = cur.min_segment;
+      c.segment_max_jump = cur.segment_max_jump;
+      return;
+    }
+    cellsight::applyLineThresholds(t, &line_);
+    ROS_INFO("triangulation: line thresholds now min_contrast %.1f, threshold_fraction %.2f, max_run %d, "
+             "secondary_peak_ratio %.2f, min_segment %d, segment_max_jump %.2f",
+             t.min_contrast, t.threshold_fraction, t.max_run, t.secondary_peak_ratio, t.min_segment, t.segment_max_jump);
+  }
+
   void onInfo(const sensor_msgs::CameraInfoConstPtr& msg) {
     cellsight::CameraIntrinsics K;
     try {
@@ -85,6 +127,7 @@ class Triangulation {
           ROS_WARN("triangulation: still no camera_info on scanner_camera/camera_info after %zu frames: "
                    "the oldest is dropped; is the camera driver publishing it?", held_.size());
           held_.pop_front();
+          diag_.dropped("no camera_info");
           ++frames_;
           cv_.notify_all();
         }
@@ -98,6 +141,7 @@ class Triangulation {
       processFrame(image, plane_msg);
     } catch (const std::exception& e) {
       ROS_ERROR_THROTTLE(2.0, "triangulation: frame at %.6f dropped: %s", image->header.stamp.toSec(), e.what());
+      diag_.dropped("processing error");
     }
     std::lock_guard<std::mutex> lock(mutex_);
     ++frames_;
@@ -105,23 +149,27 @@ class Triangulation {
   }
 
   void processFrame(const sensor_msgs::ImageConstPtr& image, const cellsight::LaserPlaneStampedConstPtr& plane_msg) {
+    const ros::WallTime t0 = ros::WallTime::now();
     std::shared_ptr<const cellsight::UndistortionMap> map;
+    cellsight::LineExtractionConfig lc;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       map = map_;
+      lc = line_;  // the thresholds may change (dynamic_reconfigure) between frames
     }
     // not null: onFrame holds frames back until the first camera_info, and map_ is never reset
     if (static_cast<int>(image->width) != map->camera().width || static_cast<int>(image->height) != map->camera().height) {
       ROS_ERROR_THROTTLE(5.0, "triangulation: image %ux%u does not match camera_info %dx%d: frame dropped",
                          image->width, image->height, map->camera().width, map->camera().height);
+      diag_.dropped("image size differs from camera_info");
       return;
     }
     if (plane_msg->header.frame_id != image->header.frame_id) {
       ROS_ERROR_THROTTLE(5.0, "triangulation: laser plane in '%s' but image in '%s': frame dropped",
                          plane_msg->header.frame_id.c_str(), image->header.frame_id.c_str());
+      diag_.dropped("laser plane and image in different frames");
       return;
     }
-    cellsight::LineExtractionConfig lc = line_;
     cv::Mat img;
     if (image->encoding == enc::MONO8) {
       img = cv_bridge::toCvShare(image)->image;
@@ -133,6 +181,7 @@ class Triangulation {
     } else {
       ROS_ERROR_THROTTLE(5.0, "triangulation: encoding '%s' is not supported (mono8, rgb8, bgr8): frame dropped",
                          image->encoding.c_str());
+      diag_.dropped("unsupported image encoding");
       return;
     }
     geometry_msgs::TransformStamped T;
@@ -141,6 +190,7 @@ class Triangulation {
     } catch (const tf2::TransformException& e) {
       ROS_ERROR_THROTTLE(2.0, "triangulation: frame at %.6f dropped: no %s -> %s at its stamp: %s",
                          image->header.stamp.toSec(), base_frame_.c_str(), image->header.frame_id.c_str(), e.what());
+      diag_.dropped("no camera transform at the image stamp");
       return;
     }
     const Eigen::Isometry3d T_base_camera = cellsight_ros::fromTransformMsg(T.transform);
@@ -158,8 +208,10 @@ class Triangulation {
       ROS_DEBUG("triangulation: no line in frame %.6f (%d columns without a line, %d ambiguous)",
                 image->header.stamp.toSec(), st.no_line, st.ambiguous);
     }
+    diag_.processed((ros::WallTime::now() - t0).toSec());
     std::lock_guard<std::mutex> lock(mutex_);
     camera_center_ = T_base_camera.translation().cast<float>();
+    if (image->header.stamp > last_stamp_) last_stamp_ = image->header.stamp;
     for (size_t i = 0; i < profile.size(); ++i) scan_.append(profile.points[i], profile.intensity[i]);
   }
 
@@ -168,6 +220,7 @@ class Triangulation {
     scan_ = cellsight::ScanCloud();
     scan_.frame_id = base_frame_;
     frames_ = 0;
+    last_stamp_ = ros::Time();
     held_.clear();
     res.success = true;
     res.message = "scan cleared";
@@ -177,6 +230,7 @@ class Triangulation {
   bool onFinish(cellsight::FinishScan::Request& req, cellsight::FinishScan::Response& res) {
     cellsight::ScanCloud cloud;
     Eigen::Vector3f viewpoint;
+    ros::Time stamp;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       if (req.expected_frames > 0) {
@@ -193,6 +247,7 @@ class Triangulation {
       }
       cloud = scan_;
       viewpoint = camera_center_;
+      stamp = last_stamp_;
       res.frames = frames_;
     }
     cloud.frame_id = base_frame_;
@@ -206,7 +261,8 @@ class Triangulation {
     if (normal_k_ > 0 && cloud.size() > static_cast<size_t>(normal_k_)) {
       cellsight::estimateNormals(cloud, normal_k_, viewpoint);
     }
-    res.cloud = cellsight_ros::toCloudMsg(cloud, ros::Time::now());
+    // the scan is as old as its last frame: consumers look transforms up at that stamp
+    res.cloud = cellsight_ros::toCloudMsg(cloud, stamp);
     res.points = static_cast<uint32_t>(cloud.size());
     cloud_pub_.publish(res.cloud);
     if (!req.output_file.empty()) {
@@ -225,8 +281,11 @@ class Triangulation {
     return true;
   }
 
-  cellsight::LineExtractionConfig line_;
+  cellsight_ros::NodeDiagnostics diag_;
+  cellsight::LineExtractionConfig line_;  // guarded by mutex_ once the node runs
   cellsight::TriangulationConfig tri_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<cellsight::ScannerLineConfig>> reconfigure_;
   std::string base_frame_ = "base_link";
   int outlier_k_ = 20;
   double outlier_std_ = 3.0;
@@ -235,7 +294,8 @@ class Triangulation {
   Eigen::AlignedBox3f workspace_;
   tf2_ros::Buffer buffer_;
   tf2_ros::TransformListener listener_;
-  message_filters::Subscriber<sensor_msgs::Image> image_sub_;
+  image_transport::ImageTransport it_;
+  image_transport::SubscriberFilter image_sub_;
   message_filters::Subscriber<cellsight::LaserPlaneStamped> plane_sub_;
   message_filters::TimeSynchronizer<sensor_msgs::Image, cellsight::LaserPlaneStamped> sync_;
   ros::Subscriber info_sub_;
@@ -249,12 +309,11 @@ class Triangulation {
   std::deque<Frame> held_;  // frames that came before the first camera_info
   cellsight::ScanCloud scan_;
   uint32_t frames_ = 0;
+  ros::Time last_stamp_;  // newest frame in scan_
   Eigen::Vector3f camera_center_ = Eigen::Vector3f::Zero();
 };
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  // scan/finish waits for frames that other callbacks process.
-  return cellsight_ros::runNode<Triangulation>(argc, argv, "triangulation", 3);
-}
+// scan/finish waits for frames that other callbacks process.
+CELLSIGHT_NODE(Triangulation, "triangulation", 3)

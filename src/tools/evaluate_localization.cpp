@@ -1,40 +1,81 @@
 // cellsight_evaluate_localization: localisation figures against ground truth (issue 4).
+// Usage: cellsight_evaluate_localization SUBCOMMAND [OPTIONS]   (--help on the tool and each subcommand)
 //   demo       detections of the demo scan vs the simulator's truth → detections.json
+//              --detections detections_raw.json [--scene S.yaml] [--models F] [--root R]
+//              [--max-t-mm 5] [--max-r-deg 5] [--json out.json]; exit 3 unless every part is found
 //   occlusion  the thesis's random-walk occlusion test on single-view clouds of our parts
+//              [--parts blade,housing,holder] [--trials 100] [--from 0.25] [--to 0.75] [--step 0.05]
+//              [--ks 20] [--min-fitness F] + the sweep options below
 //   outliers   uniform outliers with random normals in the workspace box, 0…200 % of the points
+//              [--parts blade,housing,holder,bracket] [--trials 50] [--ratios 0,0.25,0.5,1,1.5,2]
+//              + the sweep options below
+//   real       a mesh model located in a real scene without truth (e.g. UWA): --model mesh.ply
+//              --scene scene.ply --matching M.yaml [--scale 0.001] [--json out.json] [--png overlay.png];
+//              exit 3 when not found
+//   sweep options (occlusion, outliers): [--search all|self] [--root repo] [--scene S.yaml]
+//              [--models folder] [--matching matching.yaml] [--max-t-mm 2] [--max-r-deg 2]
+//              [--json out.json] [--png curves.png]
+//   --png of a sweep: success-rate curves drawn by /usr/bin/gnuplot; the data and the script stay
+//   beside it (curves.png.dat, curves.png.gp: re-plot with `cd <folder> && gnuplot curves.png.gp`).
+//   No gnuplot, or a failing one: a warning, the JSON is still written (it is the result).
+// Bad or unknown options are reported by CLI11 (non-zero exit); failures at run time print
+// "error: ..." and exit 1.
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iomanip>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
 
-#include "cellsight/file_io.hpp"
-#include "cellsight/localization_eval.hpp"
-#include "cellsight/mesh.hpp"
-#include "cellsight/scan_cloud.hpp"
-#include "cellsight/model_matching.hpp"
-#include "cellsight/scene.hpp"
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/localization/localization_eval.hpp"
+#include "cellsight/common/mesh.hpp"
+#include "cellsight/common/scan_cloud.hpp"
+#include "cellsight/localization/model_matching.hpp"
+#include "cellsight/sim/scene.hpp"
 #include "cli_args.hpp"
 
 using namespace cellsight;
-using cellsight_tools::Args;
 using json = nlohmann::json;
 
 namespace {
 
 const double kDeg = M_PI / 180;
 
-std::vector<std::string> split(const std::string& s) {
+/// The options of one subcommand (each has its own instance and defaults).
+struct Options {
+  std::string root = ".", scene, models, matching, json, png;
+  std::string search = "all";
+  double max_t_mm = 2, max_r_deg = 2;
+  int trials = 100, ks = 20;
+  double from = 0.25, to = 0.75, step = 0.05;
+  double min_fitness = 0;
+  bool min_fitness_given = false;
+  std::vector<std::string> parts;
+  std::vector<double> ratios;
+  std::string detections, model;
+  double scale = 1;
+  /// `value`, or `<root>/<relative>` when not given
+  std::string orRoot(const std::string& value, const std::string& relative) const {
+    return value.empty() ? root + "/" + relative : value;
+  }
+};
+
+/// Drops empty names ("a,,b" -> a, b), as the comma-separated lists always did.
+std::vector<std::string> nonEmpty(const std::vector<std::string>& v) {
   std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string t; std::getline(ss, t, ',');)
-    if (!t.empty()) out.push_back(t);
+  for (const auto& s : v)
+    if (!s.empty()) out.push_back(s);
   return out;
 }
 
@@ -49,38 +90,100 @@ void writeJson(const std::string& path, const json& j) {
   writeFileAtomic(path, j.dump(2) + "\n");
 }
 
-/// Success-rate curves (one per series) over x, 0…100 %, as a PNG.
+/// A string literal of gnuplot (single quotes: only ' itself is doubled).
+std::string gpQuote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("''") : std::string(1, c);
+  return out + "'";
+}
+
+/// A word for /bin/sh (single quotes).
+std::string shQuote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+const char* const kGnuplot = "/usr/bin/gnuplot";
+
+/// Success-rate curves (one per series) over x, 0…100 %, as a PNG drawn by gnuplot. Beside the
+/// PNG stay the data (<png>.dat) and the script (<png>.gp), which reads the data by its file name
+/// in the PNG's folder: `cd <folder> && gnuplot <png>.gp` re-plots. gnuplot writes <png>.tmp,
+/// renamed onto <png> when it succeeded. Without gnuplot, or when it fails: a warning only.
 void plot(const std::string& path, const std::string& title, const std::string& xlabel, const std::vector<double>& x,
           const std::vector<std::pair<std::string, std::vector<double>>>& series) {
+  namespace fs = std::filesystem;
   if (path.empty() || x.empty()) return;
-  const int W = 900, H = 560, L = 80, R = 200, T = 50, B = 70;
-  cv::Mat img(H, W, CV_8UC3, cv::Scalar(255, 255, 255));
-  const double x0 = x.front(), x1 = std::max(x.back(), x0 + 1e-9);
-  auto px = [&](double v) { return L + static_cast<int>((v - x0) / (x1 - x0) * (W - L - R)); };
-  auto py = [&](double v) { return H - B - static_cast<int>(v / 100.0 * (H - T - B)); };
-  for (int g = 0; g <= 100; g += 20) {
-    cv::line(img, {L, py(g)}, {W - R, py(g)}, cv::Scalar(220, 220, 220), 1);
-    cv::putText(img, std::to_string(g), {L - 40, py(g) + 5}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1);
+  const fs::path png(path);
+  const fs::path dir = png.has_parent_path() ? png.parent_path() : fs::path(".");
+  const std::string base = png.filename().string();
+  const std::string dat = base + ".dat", gp = base + ".gp", tmp = base + ".tmp";
+
+  std::ostringstream d;
+  d << "# " << title << "\n# column 1: " << xlabel << "; then success [%] per series:";
+  for (const auto& s : series) d << " " << s.first;
+  d << "\n";
+  d << std::setprecision(10);
+  for (size_t i = 0; i < x.size(); ++i) {
+    d << x[i];
+    for (const auto& s : series) {
+      d << "\t";
+      if (i < s.second.size()) d << s.second[i]; else d << "NaN";
+    }
+    d << "\n";
   }
-  for (double v : x) {
-    std::ostringstream s;
-    s << std::round(v * 100) / 100;
-    cv::putText(img, s.str(), {px(v) - 12, H - B + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(0, 0, 0), 1);
-  }
-  cv::rectangle(img, {L, T}, {W - R, H - B}, cv::Scalar(0, 0, 0), 1);
-  cv::putText(img, title, {L, 30}, cv::FONT_HERSHEY_SIMPLEX, 0.6, cv::Scalar(0, 0, 0), 1);
-  cv::putText(img, xlabel, {L + 150, H - 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1);
-  cv::putText(img, "success %", {5, T - 10}, cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1);
-  const cv::Scalar colours[] = {{200, 60, 30}, {30, 140, 30}, {30, 30, 200}, {150, 0, 150}, {0, 140, 200}, {90, 90, 90}};
+  writeFileAtomic((dir / dat).string(), d.str());
+
+  std::ostringstream g;
+  g << "# " << title << " (written by cellsight_evaluate_localization)\n"
+    << "# re-plot: cd <this folder> && gnuplot " << gp << "   (writes " << base << "; gnuplot -e \"out='other.png'\" "
+    << gp << " writes other.png)\n"
+    << "if (!exists(\"out\")) out = " << gpQuote(base) << "\n"
+    << "if (strstrt(GPVAL_TERMINALS, 'pngcairo') > 0) {\n"
+    << "  set terminal pngcairo noenhanced size 900,560 font 'sans,10'\n"
+    << "} else {\n"
+    << "  set terminal png noenhanced size 900,560\n"
+    << "}\n"
+    << "set output out\n"
+    << "set title " << gpQuote(title) << "\n"
+    << "set xlabel " << gpQuote(xlabel) << "\n"
+    << "set ylabel 'success [%]'\n"
+    << "set yrange [0:100]\n"
+    << "set ytics 0,20,100\n"
+    << "set grid\n"
+    << "set key outside right top\n"
+    << "set datafile missing 'NaN'\n"
+    << "plot";
   for (size_t k = 0; k < series.size(); ++k) {
-    const cv::Scalar c = colours[k % 6];
-    for (size_t i = 1; i < x.size() && i < series[k].second.size(); ++i)
-      cv::line(img, {px(x[i - 1]), py(series[k].second[i - 1])}, {px(x[i]), py(series[k].second[i])}, c, 2, cv::LINE_AA);
-    cv::putText(img, series[k].first, {W - R + 15, T + 25 * static_cast<int>(k + 1)}, cv::FONT_HERSHEY_SIMPLEX, 0.5, c, 2);
+    g << (k ? ", \\\n    " : " ") << (k ? "''" : gpQuote(dat)) << " using 1:" << k + 2 << " with linespoints lw 2 pt 7 title "
+      << gpQuote(series[k].first);
   }
-  std::vector<uchar> buf;
-  cv::imencode(".png", img, buf);
-  writeFileAtomic(path, std::string(buf.begin(), buf.end()));
+  g << "\nset output\n";
+  writeFileAtomic((dir / gp).string(), g.str());
+
+  const std::string command = "cd " + shQuote(dir.string()) + " && " + kGnuplot + " -e " + shQuote("out=" + gpQuote(tmp)) + " " +
+                              shQuote(gp);
+  auto warn = [&](const std::string& why) {
+    std::cerr << "warning: " << path << ": plot not drawn: " << why << " (command: " << command << "); the data and the script are in "
+              << (dir / dat).string() << " and " << (dir / gp).string() << "\n";
+  };
+  if (::access(kGnuplot, X_OK) != 0) {
+    warn(std::string(kGnuplot) + " is missing (Debian package gnuplot-nox)");
+    return;
+  }
+  std::error_code ec;
+  const int status = std::system(command.c_str());
+  if (status == -1 || !WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    if (fs::is_regular_file(dir / tmp, ec)) fs::remove(dir / tmp, ec);
+    warn("gnuplot failed (status " + std::to_string(status == -1 || !WIFEXITED(status) ? status : WEXITSTATUS(status)) + ")");
+    return;
+  }
+  fs::rename(dir / tmp, png, ec);
+  if (ec) {
+    const std::string why = ec.message();
+    if (fs::is_regular_file(dir / tmp, ec)) fs::remove(dir / tmp, ec);
+    warn("cannot move " + (dir / tmp).string() + " onto it: " + why);
+  }
 }
 
 struct Setup {
@@ -90,12 +193,11 @@ struct Setup {
   Eigen::AlignedBox3f workspace;
 };
 
-Setup setup(const Args& a) {
+Setup setup(const Options& o) {
   Setup s;
-  const std::string root = a.get("root", ".");
-  const Scene scene = loadScene(a.get("scene", root + "/config/scenes/demo.yaml"));
-  s.lib = std::make_shared<const ModelLibrary>(a.get("models", root + "/config/models"));
-  s.cfg = loadMatchingConfig(a.get("matching", root + "/config/matching.yaml"));
+  const Scene scene = loadScene(o.orRoot(o.scene, "config/scenes/demo.yaml"));
+  s.lib = std::make_shared<const ModelLibrary>(o.orRoot(o.models, "config/models"));
+  s.cfg = loadMatchingConfig(o.orRoot(o.matching, "config/matching.yaml"));
   s.eye = scene.scanner_camera.T_base_camera.translation().cast<float>();
   s.cfg.viewpoint = s.eye;
   s.workspace = Eigen::AlignedBox3f(scene.workspace.min().cast<float>(), scene.workspace.max().cast<float>());
@@ -159,11 +261,11 @@ using Degrade = std::function<ScanCloud(const ScanCloud& view, double x, std::mt
 
 /// For each part and each x: `--trials` single views at random table poses, degraded, located;
 /// success rates and median times into `j`, then the JSON and the plot.
-int sweep(const Args& a, const Setup& s, const MatchingConfig& cfg, const std::vector<std::string>& parts, int trials,
+int sweep(const Options& o, const Setup& s, const MatchingConfig& cfg, const std::vector<std::string>& parts, int trials,
           const std::string& what, const std::vector<double>& xs, uint64_t seed, const Degrade& degrade, json& j,
           const std::string& title, const std::string& xlabel) {
-  const double max_t = std::stod(a.get("max-t-mm", "2")) * 1e-3, max_r = std::stod(a.get("max-r-deg", "2")) * kDeg;
-  const bool all_models = a.get("search", "all") == "all";
+  const double max_t = o.max_t_mm * 1e-3, max_r = o.max_r_deg * kDeg;
+  const bool all_models = o.search == "all";
   ModelMatcher m(s.lib, cfg);
   m.prepare({});
   j["models_searched"] = all_models ? "all (identify and locate)" : "the part's own model (locate only)";
@@ -197,20 +299,19 @@ int sweep(const Args& a, const Setup& s, const MatchingConfig& cfg, const std::v
     j["parts"][id] = {{"success_percent", rates}, {"success_percent_thesis_criterion", rates_thesis}, {"median_seconds", times}};
     series.push_back({id, rates});
   }
-  writeJson(a.get("json"), j);
+  writeJson(o.json, j);
   std::vector<double> percent;
   for (double x : xs) percent.push_back(x * 100);
-  plot(a.get("png"), title, xlabel, percent, series);
+  plot(o.png, title, xlabel, percent, series);
   return 0;
 }
 
-int runOcclusion(const Args& a) {
-  const Setup s = setup(a);
-  const int trials = std::stoi(a.get("trials", "100"));
-  const int k_s = std::stoi(a.get("ks", "20"));
+int runOcclusion(const Options& o) {
+  const Setup s = setup(o);
+  const int trials = o.trials;
+  const int k_s = o.ks;
   std::vector<double> levels;
-  for (double l = std::stod(a.get("from", "0.25")); l <= std::stod(a.get("to", "0.75")) + 1e-9; l += std::stod(a.get("step", "0.05")))
-    levels.push_back(l);
+  for (double l = o.from; l <= o.to + 1e-9; l += o.step) levels.push_back(l);
   json j;
   j["test"] = "random-walk occlusion (thesis ch. 5): single-view clouds of each part at random table poses";
   j["trials_per_level"] = trials;
@@ -220,17 +321,16 @@ int runOcclusion(const Args& a) {
   // with a share x deleted F <= 1 - x and the default 0.35 rejects every pose beyond ~65 %.
   // `--min-fitness` lowers it to measure pose recovery alone (the thesis's test).
   MatchingConfig cfg = s.cfg;
-  cfg.min_fitness = std::stod(a.get("min-fitness", std::to_string(cfg.min_fitness)));
-  return sweep(a, s, cfg, split(a.get("parts", "blade,housing,holder")), trials, "occlusion", levels, 0,
+  if (o.min_fitness_given) cfg.min_fitness = o.min_fitness;
+  return sweep(o, s, cfg, nonEmpty(o.parts), trials, "occlusion", levels, 0,
                [k_s](const ScanCloud& v, double x, std::mt19937_64& rng) { return randomWalkOcclusion(v, x, k_s, rng); }, j,
                "occlusion: success rate per part", "occlusion %");
 }
 
-int runOutliers(const Args& a) {
-  const Setup s = setup(a);
-  const int trials = std::stoi(a.get("trials", "50"));
-  std::vector<double> ratios;
-  for (const auto& r : split(a.get("ratios", "0,0.25,0.5,1,1.5,2"))) ratios.push_back(std::stod(r));
+int runOutliers(const Options& o) {
+  const Setup s = setup(o);
+  const int trials = o.trials;
+  const std::vector<double>& ratios = o.ratios;
   MatchingConfig cfg = s.cfg;
   cfg.min_coverage = 0;  // the outliers are part of the cloud: nothing can explain them
   json j;
@@ -238,7 +338,7 @@ int runOutliers(const Args& a) {
   j["ratios"] = ratios;
   j["trials_per_ratio"] = trials;
   const Eigen::AlignedBox3f box = s.workspace;
-  return sweep(a, s, cfg, split(a.get("parts", "blade,housing,holder,bracket")), trials, "outliers", ratios, 77,
+  return sweep(o, s, cfg, nonEmpty(o.parts), trials, "outliers", ratios, 77,
                [box](const ScanCloud& v, double x, std::mt19937_64& rng) { return addUniformOutliers(v, box, x, rng); }, j,
                "outliers: success rate per part", "outliers, % of the part's points");
 }
@@ -250,21 +350,20 @@ Eigen::Isometry3d poseOf(const json& d) {
   return T;
 }
 
-int runDemo(const Args& a) {
-  const std::string root = a.get("root", ".");
-  const Scene scene = loadScene(a.get("scene", root + "/config/scenes/demo.yaml"));
-  auto lib = std::make_shared<const ModelLibrary>(a.get("models", root + "/config/models"));
+int runDemo(const Options& o) {
+  const Scene scene = loadScene(o.orRoot(o.scene, "config/scenes/demo.yaml"));
+  auto lib = std::make_shared<const ModelLibrary>(o.orRoot(o.models, "config/models"));
   ModelMatcher centroids(lib, MatchingConfig());
-  std::ifstream f(a.get("detections"));
-  if (!f) throw std::runtime_error("cannot read --detections '" + a.get("detections") + "'");
+  std::ifstream f(o.detections);
+  if (!f) throw std::runtime_error("cannot read --detections '" + o.detections + "'");
   json raw;
   try {
     f >> raw;
   } catch (const std::exception& e) {
-    throw std::runtime_error(a.get("detections") + ": not valid JSON: " + e.what());
+    throw std::runtime_error(o.detections + ": not valid JSON: " + e.what());
   }
   // "found": the right model within 5 mm / 5° (a gross-error test); the errors are reported as measured
-  const double max_t = std::stod(a.get("max-t-mm", "5")) * 1e-3, max_r = std::stod(a.get("max-r-deg", "5")) * kDeg;
+  const double max_t = o.max_t_mm * 1e-3, max_r = o.max_r_deg * kDeg;
   json out;
   out["locate_seconds"] = raw.value("locate_seconds", 0.0);
   out["success"] = {{"max_t_mm", max_t * 1e3}, {"max_r_deg", max_r / kDeg}};
@@ -318,7 +417,7 @@ int runDemo(const Args& a) {
   out["f1"] = counts.f1();
   out["median_t_err_mm"] = median(terr);
   out["median_r_err_deg"] = median(rerr);
-  writeJson(a.get("json"), out);
+  writeJson(o.json, out);
   std::printf("demo: %d/%zu parts found, %d false, median %.3f mm %.3f deg, locate %.3f s\n", counts.tp, scene.objects.size(),
               counts.fp, median(terr), median(rerr), out["locate_seconds"].get<double>());
   return counts.fn == 0 && counts.fp == 0 ? 0 : 3;
@@ -326,14 +425,14 @@ int runDemo(const Args& a) {
 
 /// A mesh model located in a real scene without ground truth (e.g. UWA): fitness, RMSE and an
 /// overlay (scene grey, the placed model red, seen from the sensor).
-int runReal(const Args& a) {
-  const double scale = std::stod(a.get("scale", "1"));
-  const TriangleMesh mesh = loadMesh(a.get("model"), scale);
-  ScanCloud scene = loadCloud(a.get("scene"));
+int runReal(const Options& o) {
+  const double scale = o.scale;
+  const TriangleMesh mesh = loadMesh(o.model, scale);
+  ScanCloud scene = loadCloud(o.scene);
   for (auto& p : scene.points) p *= static_cast<float>(scale);
   auto lib = std::make_shared<ModelLibrary>();
   lib->addMeshModel("model", mesh);
-  MatchingConfig cfg = loadMatchingConfig(a.get("matching"));
+  MatchingConfig cfg = loadMatchingConfig(o.matching);
   cfg.min_coverage = 0;  // a whole scene, not a cluster
   cfg.max_instances = 1;
   ModelMatcher m(lib, cfg);
@@ -342,7 +441,7 @@ int runReal(const Args& a) {
   MatchStats st;
   const auto dets = m.locate({scene}, {}, &st);
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  json j = {{"model", a.get("model")}, {"scene", a.get("scene")}, {"scene_points", scene.size()},
+  json j = {{"model", o.model}, {"scene", o.scene}, {"scene_points", scene.size()},
             {"locate_seconds", st.seconds}, {"with_model_preparation_seconds", total}, {"found", !dets.empty()}};
   for (const auto& w : st.warnings) j["warnings"].push_back(w);
   if (!dets.empty()) {
@@ -352,15 +451,15 @@ int runReal(const Args& a) {
                  {"quat", {q.x(), q.y(), q.z(), q.w()}}};
     j["fitness"] = d.fitness;
     j["rmse_mm"] = d.rmse * 1e3;
-    std::printf("%s: fitness %.3f, rmse %.3f mm, locate %.2f s (%zu scene points)\n", a.get("scene").c_str(), d.fitness,
+    std::printf("%s: fitness %.3f, rmse %.3f mm, locate %.2f s (%zu scene points)\n", o.scene.c_str(), d.fitness,
                 d.rmse * 1e3, st.seconds, scene.size());
   } else {
-    std::printf("%s: not found (locate %.2f s)\n", a.get("scene").c_str(), st.seconds);
+    std::printf("%s: not found (locate %.2f s)\n", o.scene.c_str(), st.seconds);
     for (const auto& r : st.rejected)
       std::printf("  rejected: fitness %.3f rmse %.3f mm\n", r.fitness, r.rmse * 1e3);
   }
-  writeJson(a.get("json"), j);
-  if (!a.get("png").empty()) {
+  writeJson(o.json, j);
+  if (!o.png.empty()) {
     // pinhole view from the sensor (origin, looking along -z as the UWA scans do; +z otherwise)
     float zs = 0;
     for (const auto& p : scene.points) zs += p.z();
@@ -386,37 +485,102 @@ int runReal(const Args& a) {
     }
     std::vector<uchar> buf;
     cv::imencode(".png", img, buf);
-    writeFileAtomic(a.get("png"), std::string(buf.begin(), buf.end()));
+    writeFileAtomic(o.png, std::string(buf.begin(), buf.end()));
   }
   return dets.empty() ? 3 : 0;
+}
+
+/// --root, --scene, --models (demo and the sweeps).
+void addSceneOptions(CLI::App* c, Options& o) {
+  c->add_option("--root", o.root, "repository root: the defaults of --scene, --models, --matching lie under it")
+      ->check(CLI::ExistingDirectory)
+      ->capture_default_str();
+  c->add_option("--scene", o.scene, "scene YAML [default: <root>/config/scenes/demo.yaml]")->check(CLI::ExistingFile);
+  c->add_option("--models", o.models, "model library folder [default: <root>/config/models]")->check(CLI::ExistingDirectory);
+}
+
+void addSuccessOptions(CLI::App* c, Options& o) {
+  using cellsight_tools::positive;
+  c->add_option("--max-t-mm", o.max_t_mm, "success: translation error at most this [mm]")->check(positive())->capture_default_str();
+  c->add_option("--max-r-deg", o.max_r_deg, "success: rotation error at most this [deg]")->check(positive())->capture_default_str();
+}
+
+/// The options shared by occlusion and outliers.
+void addSweepOptions(CLI::App* c, Options& o) {
+  addSceneOptions(c, o);
+  c->add_option("--matching", o.matching, "matching settings YAML [default: <root>/config/matching.yaml]")
+      ->check(CLI::ExistingFile);
+  c->add_option("--search", o.search, "all: every model searched (identify and locate); self: the part's own model (locate)")
+      ->check(CLI::IsMember({"all", "self"}))
+      ->capture_default_str();
+  c->add_option("--parts", o.parts, "model ids, comma-separated")->delimiter(',')->capture_default_str();
+  c->add_option("--trials", o.trials, "random views per part and level")->check(cellsight_tools::positiveInt())->capture_default_str();
+  addSuccessOptions(c, o);
+  c->add_option("--json", o.json, "write the figures to this JSON file");
+  c->add_option("--png", o.png, "draw the success-rate curves (gnuplot) to this PNG; <png>.dat and <png>.gp stay beside it");
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string usage =
-      "usage: cellsight_evaluate_localization demo --detections detections_raw.json [--scene S.yaml] [--json out.json]\n"
-      "       cellsight_evaluate_localization occlusion [--parts blade,housing,holder] [--trials 100] [--from 0.25]\n"
-      "           [--to 0.75] [--step 0.05] [--ks 20] [--min-fitness F] [--json occ.json] [--png occ.png]\n"
-      "       cellsight_evaluate_localization outliers [--parts ...] [--trials 50] [--ratios 0,0.5,1,2] [--json] [--png]\n"
-      "       cellsight_evaluate_localization real --model mesh.ply --scene scene.ply --matching M.yaml [--scale 0.001]\n"
-      "           [--json out.json] [--png overlay.png]\n"
-      "   common: [--search all|self] [--root repo] [--models folder] [--matching matching.yaml] [--max-t-mm 2] [--max-r-deg 2]\n";
-  if (argc < 2) {
-    std::cerr << usage;
-    return 2;
-  }
-  try {
-    const std::string mode = argv[1];
-    const Args a = cellsight_tools::parse(argc, argv, 2);
-    if (mode == "demo") return runDemo(a);
-    if (mode == "occlusion") return runOcclusion(a);
-    if (mode == "outliers") return runOutliers(a);
-    if (mode == "real") return runReal(a);
-    std::cerr << usage;
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 1;
-  }
+  using cellsight_tools::fraction;
+  using cellsight_tools::positive;
+  CLI::App app("Localisation figures against ground truth: the demo scan's detections, the occlusion and outlier "
+               "sweeps on single-view clouds, a model in a real scene.",
+               "cellsight_evaluate_localization");
+  app.require_subcommand(1);
+
+  Options demo;
+  demo.max_t_mm = demo.max_r_deg = 5;  // "found": the right model within 5 mm / 5° (a gross-error test)
+  CLI::App* c_demo =
+      app.add_subcommand("demo", "detections of the demo scan vs the simulator's truth (exit 3 unless every part is found)");
+  c_demo->add_option("--detections", demo.detections, "detections_raw.json of the demo")->required()->check(CLI::ExistingFile);
+  addSceneOptions(c_demo, demo);
+  addSuccessOptions(c_demo, demo);
+  c_demo->add_option("--json", demo.json, "write the figures to this JSON file");
+
+  Options occ;
+  occ.trials = 100;
+  occ.parts = {"blade", "housing", "holder"};
+  CLI::App* c_occ = app.add_subcommand("occlusion", "the thesis's random-walk occlusion test on single-view clouds of the parts");
+  addSweepOptions(c_occ, occ);
+  c_occ->add_option("--from", occ.from, "first occlusion share")->check(fraction())->capture_default_str();
+  c_occ->add_option("--to", occ.to, "last occlusion share")->check(fraction())->capture_default_str();
+  c_occ->add_option("--step", occ.step, "occlusion share step")->check(positive())->capture_default_str();
+  c_occ->add_option("--ks", occ.ks, "random-walk k_s")->check(cellsight_tools::positiveInt())->capture_default_str();
+  CLI::Option* min_fitness =
+      c_occ->add_option("--min-fitness", occ.min_fitness, "validation fitness threshold [default: the matching settings']")
+          ->check(fraction());
+
+  Options outl;
+  outl.trials = 50;
+  outl.parts = {"blade", "housing", "holder", "bracket"};
+  outl.ratios = {0, 0.25, 0.5, 1, 1.5, 2};
+  CLI::App* c_out =
+      app.add_subcommand("outliers", "uniform outliers with random normals in the workspace box, a ratio of the part's points");
+  addSweepOptions(c_out, outl);
+  c_out->add_option("--ratios", outl.ratios, "outlier ratios, comma-separated (1 = as many outliers as part points)")
+      ->delimiter(',')
+      ->check(cellsight_tools::nonNegative())
+      ->capture_default_str();
+
+  Options real;
+  CLI::App* c_real = app.add_subcommand("real", "a mesh model located in a real scene without ground truth (exit 3 when not found)");
+  c_real->add_option("--model", real.model, "model mesh (PLY, STL, ...)")->required()->check(CLI::ExistingFile);
+  c_real->add_option("--scene", real.scene, "scene cloud (PLY, PCD)")->required()->check(CLI::ExistingFile);
+  c_real->add_option("--matching", real.matching, "matching settings YAML")->required()->check(CLI::ExistingFile);
+  c_real->add_option("--scale", real.scale, "scale of the model and scene coordinates to metres (0.001: mm)")
+      ->check(positive())
+      ->capture_default_str();
+  c_real->add_option("--json", real.json, "write the result to this JSON file");
+  c_real->add_option("--png", real.png, "draw an overlay (scene grey, placed model red, seen from the sensor) to this PNG");
+
+  if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
+  occ.min_fitness_given = min_fitness->count() > 0;
+  return cellsight_tools::runTool([&] {
+    if (c_demo->parsed()) return runDemo(demo);
+    if (c_occ->parsed()) return runOcclusion(occ);
+    if (c_out->parsed()) return runOutliers(outl);
+    return runReal(real);
+  });
 }

@@ -1,29 +1,30 @@
 // Line-centre accuracy of each estimator vs noise level, on rendered lines with a known centre
 // (the scene's camera, laser and noise model over a bare table). Prints a Markdown table and,
 // with --json FILE, writes the figures.
-// Usage: cellsight_line_accuracy <scene.yaml> [--json out.json] [--frames N]
-#include <cstring>
+// Usage: cellsight_line_accuracy <scene.yaml> [--json out.json] [--frames N]   (--help for details)
+// Bad or unknown options are reported by CLI11 (non-zero exit); failures at run time print
+// "error: ..." and exit 1.
 #include <iostream>
 #include <nlohmann/json.hpp>
 
-#include "cellsight/evaluation.hpp"
-#include "cellsight/file_io.hpp"
+#include "cellsight/eval/evaluation.hpp"
+#include "cellsight/common/file_io.hpp"
+#include "cli_args.hpp"
 
 using namespace cellsight;
 
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::cerr << "usage: cellsight_line_accuracy <scene.yaml> [--json out.json] [--frames N]\n";
-    return 2;
-  }
-  std::string json_path;
+  std::string scene_file, json_path;
   int frames = 5;
-  for (int i = 2; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--json")) json_path = argv[i + 1];
-    if (!std::strcmp(argv[i], "--frames")) frames = std::stoi(argv[i + 1]);
-  }
+  CLI::App app("Line-centre accuracy of each estimator vs noise level, on rendered lines with a known centre (the "
+               "scene's camera, laser and noise model over a bare table). Prints a Markdown table.",
+               "cellsight_line_accuracy");
+  app.add_option("scene", scene_file, "scene YAML")->required()->check(CLI::ExistingFile);
+  app.add_option("--json", json_path, "write the figures to this JSON file");
+  app.add_option("--frames", frames, "frames per noise level")->check(cellsight_tools::positiveInt())->capture_default_str();
+  if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
   try {
-    Scene base = loadScene(argv[1]);
+    Scene base = loadScene(scene_file);
     base.objects.clear();
     struct Variant {
       std::string name;

@@ -1,11 +1,13 @@
 // Generates the meshes of cellsight's own demo parts (config/models/<id>/mesh.ply) from
 // primitives. The model.yaml metadata beside each mesh is written by hand.
-// Usage: cellsight_make_models <config/models folder>
+// Usage: cellsight_make_models <config/models folder>   (--help for details)
+// Bad or unknown options are reported by CLI11 (non-zero exit); failures print "error: ..." and exit 1.
 #include <cmath>
 #include <iostream>
 
-#include "cellsight/ground_truth.hpp"
-#include "cellsight/mesh.hpp"
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/common/mesh.hpp"
+#include "cli_args.hpp"
 
 using cellsight::TriangleMesh;
 using Eigen::Isometry3d;
@@ -83,26 +85,29 @@ TriangleMesh sphere25() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 2) {
-    std::cerr << "usage: cellsight_make_models <config/models folder>\n";
-    return 2;
-  }
-  const std::string root = argv[1];
-  const std::vector<std::pair<std::string, TriangleMesh>> parts = {
-      {"bracket", bracket()},  {"housing", housing()}, {"flanged_shaft", flangedShaft()},
-      {"blade", blade()},      {"holder", holder()},   {"sphere25", sphere25()}};
-  for (const auto& p : parts) {
-    const auto check = cellsight::checkMesh(p.second);
-    if (!check.ok()) {
-      std::cerr << p.first << ": generated mesh is invalid: " << check.describe() << "\n";
-      return 1;
+  std::string root;
+  CLI::App app("Generates the meshes of cellsight's demo parts (<folder>/<id>/mesh.ply) from primitives; the "
+               "model.yaml beside each mesh is written by hand.",
+               "cellsight_make_models");
+  app.add_option("folder", root, "the models folder (config/models); created when missing")->required();
+  if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
+  return cellsight_tools::runTool([&] {
+    const std::vector<std::pair<std::string, TriangleMesh>> parts = {
+        {"bracket", bracket()},  {"housing", housing()}, {"flanged_shaft", flangedShaft()},
+        {"blade", blade()},      {"holder", holder()},   {"sphere25", sphere25()}};
+    for (const auto& p : parts) {
+      const auto check = cellsight::checkMesh(p.second);
+      if (!check.ok()) {
+        std::cerr << p.first << ": generated mesh is invalid: " << check.describe() << "\n";
+        return 1;
+      }
+      cellsight::makeDirs(root + "/" + p.first);
+      cellsight::saveMeshPly(root + "/" + p.first + "/mesh.ply", p.second);
+      const auto b = p.second.bounds();
+      std::cout << p.first << ": " << p.second.vertices.size() << " vertices, "
+                << p.second.faces.size() << " faces, size " << b.sizes().transpose() / mm
+                << " mm\n";
     }
-    cellsight::makeDirs(root + "/" + p.first);
-    cellsight::saveMeshPly(root + "/" + p.first + "/mesh.ply", p.second);
-    const auto b = p.second.bounds();
-    std::cout << p.first << ": " << p.second.vertices.size() << " vertices, "
-              << p.second.faces.size() << " faces, size " << b.sizes().transpose() / mm
-              << " mm\n";
-  }
-  return 0;
+    return 0;
+  });
 }

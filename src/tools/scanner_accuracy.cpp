@@ -4,30 +4,51 @@
 //          reference sphere (one motion), MPE_AL (K sphere scans with different projector
 //          orientations; diameter of the smallest sphere holding the K fitted centres) and the
 //          flatness of a bare table patch.
+//   scan:  a scan made elsewhere (the ROS demo) against the scene's truth, with --k the
+//          in-process K-orientation sphere scans for MPE_AL.
+//   compare: two clouds of the same scan (live, replayed): exit 0 when the same within a tolerance.
 //   cloud: MPE_P / sphere fit on any PLY/PCD cloud near a given centre (real data).
 // Output: JSON on stdout and, with --json FILE, written atomically.
+// Usage: cellsight_scanner_accuracy sim --scene S.yaml --trajectories T.yaml [--trajectory demo_sweep|none]
+//          [--no-noise] [--estimator centroid|gaussian3|run_centre] [--centroid-floor F]
+//          [--background-percentile P] [--smoothing-degree N] [--sphere-model sphere25] [--k 5]
+//          [--sphere-step-mm 0.5] [--no-filter] [--ply scan.ply] [--json out.json]
+//        cellsight_scanner_accuracy scan --scene S.yaml --cloud scan.ply [--k 5] [--sphere-model sphere25]
+//          [--json out.json]
+//        cellsight_scanner_accuracy compare --a live.ply --b replay.ply [--tolerance-m 1e-6]
+//        cellsight_scanner_accuracy cloud --cloud scan.ply --center x,y,z [--radius-mm 12.5] [--margin-mm 3]
+//          [--json out.json]
+//        (--help on the tool and on each subcommand.) Bad or unknown options are reported by CLI11
+//        (non-zero exit); failures at run time print "error: ..." and exit 1.
+#include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <iostream>
-#include <map>
 #include <nlohmann/json.hpp>
 #include <numeric>
-#include <sstream>
 #include <tuple>
 
 #include "cli_args.hpp"
-#include "cellsight/accuracy.hpp"
-#include "cellsight/evaluation.hpp"
-#include "cellsight/file_io.hpp"
-#include "cellsight/sim_scan.hpp"
-#include "cellsight/trajectory.hpp"
+#include "cellsight/scanner/accuracy.hpp"
+#include "cellsight/eval/evaluation.hpp"
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/eval/sim_scan.hpp"
+#include "cellsight/common/trajectory.hpp"
 
 using namespace cellsight;
 
 namespace {
 
-using cellsight_tools::Args;
-using cellsight_tools::parse;
+/// The options of one subcommand (each has its own instance).
+struct Options {
+  std::string scene, trajectories, trajectory = "demo_sweep", estimator = "centroid";
+  std::string sphere_model = "sphere25", ply, json, cloud, a, b;
+  bool no_noise = false, no_filter = false;
+  LineExtractionConfig line;  // --centroid-floor, --background-percentile, --smoothing-degree
+  int k = 5;
+  bool k_given = false;
+  double sphere_step_mm = 0.5, tolerance_m = 1e-6, radius_mm = 12.5, margin_mm = 3;
+  std::vector<double> center;
+};
 
 std::vector<Eigen::Vector3d> toDouble(const ScanCloud& c) {
   std::vector<Eigen::Vector3d> out;
@@ -52,14 +73,11 @@ nlohmann::json sphereJson(const SphereFit& f) {
           {"form_range_mm", f.form_range * 1e3}};
 }
 
-int runSim(const Args& a) {
-  Scene scene = loadScene(a.get("scene"));
-  if (a.flag("no-noise")) scene.noise.enabled = false;
-  LineExtractionConfig line;
-  line.estimator = LineExtractionConfig::parseEstimator(a.get("estimator", "centroid"));
-  line.centroid_floor = std::stod(a.get("centroid-floor", std::to_string(line.centroid_floor)));
-  line.background_percentile = std::stod(a.get("background-percentile", std::to_string(line.background_percentile)));
-  line.smoothing_degree = std::stoi(a.get("smoothing-degree", std::to_string(line.smoothing_degree)));
+int runSim(const Options& o) {
+  Scene scene = loadScene(o.scene);
+  if (o.no_noise) scene.noise.enabled = false;
+  LineExtractionConfig line = o.line;
+  line.estimator = LineExtractionConfig::parseEstimator(o.estimator);
   TriangulationConfig tri;
   auto geometry = std::make_shared<CellGeometry>(scene);
   ScannerRenderer renderer(geometry);
@@ -69,16 +87,20 @@ int runSim(const Args& a) {
   nlohmann::json out;
   out["scene"] = scene.file;
   out["noise"] = scene.noise.enabled;
-  out["estimator"] = a.get("estimator", "centroid");
+  out["estimator"] = o.estimator;
 
   // 1. The whole scene along a named trajectory: surface error vs truth.
-  const std::string traj_name = a.get("trajectory", "demo_sweep");
+  const std::string& traj_name = o.trajectory;
   if (traj_name != "none") {
-    const Trajectory traj = loadTrajectories(a.get("trajectories")).at(traj_name);
+    if (o.trajectories.empty()) throw std::invalid_argument("--trajectories is required unless --trajectory none");
+    const auto trajectories = loadTrajectories(o.trajectories);
+    if (!trajectories.count(traj_name))
+      throw std::invalid_argument("--trajectory: '" + traj_name + "' not found in " + o.trajectories);
+    const Trajectory& traj = trajectories.at(traj_name);
     SimScanStats st;
     ScanCloud raw = simulateScan(renderer, traj.poses, cal, line, tri, scene.noise.seed, &st);
     ScanCloud cloud = cropBox(raw, ws);
-    if (!a.flag("no-filter")) cloud = statisticalOutlierRemoval(cloud, 20, 3.0);
+    if (!o.no_filter) cloud = statisticalOutlierRemoval(cloud, 20, 3.0);
     const SurfaceErrorStats e = SurfaceDistance(scene).stats(toDouble(cloud));
     out["scan"] = {{"trajectory", traj_name},
                    {"frames", st.frames},
@@ -92,18 +114,18 @@ int runSim(const Args& a) {
                    {"surface_error_mean_mm", e.mean_abs * 1e3},
                    {"render_ms_per_frame", 1e3 * st.render_seconds / std::max<size_t>(1, st.frames)},
                    {"process_ms_per_frame", 1e3 * st.process_seconds / std::max<size_t>(1, st.frames)}};
-    if (a.kv.count("ply")) saveCloud(a.get("ply"), cloud);
+    if (!o.ply.empty()) saveCloud(o.ply, cloud);
   }
 
   // 2. Reference sphere: K scans with the projector turned by 360°/K each.
   const SceneObject* sphere = nullptr;
-  for (const auto& o : scene.objects) {
-    if (o.model == a.get("sphere-model", "sphere25")) sphere = &o;
+  for (const auto& obj : scene.objects) {
+    if (obj.model == o.sphere_model) sphere = &obj;
   }
   if (sphere) {
-    const int K = std::stoi(a.get("k", "5"));
-    const double step = std::stod(a.get("sphere-step-mm", "0.5")) * 1e-3;
-    const SphereAcceptance acc = sphereAcceptance(renderer, *sphere, cal, line, tri, K, step, !a.flag("no-filter"));
+    const int K = o.k;
+    const double step = o.sphere_step_mm * 1e-3;
+    const SphereAcceptance acc = sphereAcceptance(renderer, *sphere, cal, line, tri, K, step, !o.no_filter);
     nlohmann::json scans = nlohmann::json::array();
     for (int k = 0; k < K; ++k) {
       nlohmann::json j = sphereJson(acc.fits[static_cast<size_t>(k)]);
@@ -129,10 +151,10 @@ int runSim(const Args& a) {
       for (double fy : {0.06, 0.5, 0.94}) {
         const Eigen::Vector3d cand = scene.workspace.min() + Eigen::Vector3d(fx, fy, 0).cwiseProduct(scene.workspace.sizes());
         bool clear = true;
-        for (const auto& o : scene.objects) {
+        for (const auto& obj : scene.objects) {
           Eigen::AlignedBox3d b;
-          const TriangleMesh m = loadValidMesh(o.info.mesh_file);
-          for (const auto& v : m.vertices) b.extend(o.T_base_object * v.cast<double>());
+          const TriangleMesh m = loadValidMesh(obj.info.mesh_file);
+          for (const auto& v : m.vertices) b.extend(obj.T_base_object * v.cast<double>());
           const Eigen::Vector3d lo(b.min().x() - 0.045, b.min().y() - 0.03, -1), hi(b.max().x() + 0.045, b.max().y() + 0.03, 1);
           if (Eigen::AlignedBox3d(lo, hi).contains(Eigen::Vector3d(cand.x(), cand.y(), 0))) clear = false;
         }
@@ -145,7 +167,7 @@ int runSim(const Args& a) {
     }
     const auto poses = sweepAcross(scene, target, 0, 0.010, 0.001, scene.robot.home.translation().z());
     ScanCloud c = simulateScan(renderer, poses, cal, line, tri, scene.noise.seed + 7);
-    if (!a.flag("no-filter")) c = statisticalOutlierRemoval(c, 20, 3.0);
+    if (!o.no_filter) c = statisticalOutlierRemoval(c, 20, 3.0);
     std::vector<Eigen::Vector3d> pts;
     for (const auto& p : c.points) {
       if (std::abs(p.x() - target.x()) < 0.02 && std::abs(p.y() - target.y()) < 0.008 &&
@@ -157,15 +179,15 @@ int runSim(const Args& a) {
                        {"points", pts.size()}, {"rms_mm", pf.rms * 1e3}, {"flatness_mm", pf.flatness * 1e3}};
   }
   std::cout << out.dump(2) << "\n";
-  if (a.kv.count("json")) writeFileAtomic(a.get("json"), out.dump(2) + "\n");
+  if (!o.json.empty()) writeFileAtomic(o.json, out.dump(2) + "\n");
   return 0;
 }
 
 // A scan made elsewhere (the ROS demo) against the scene's truth, plus, with --k, the
 // in-process K-orientation sphere scans for MPE_AL.
-int runScan(const Args& a) {
-  const Scene scene = loadScene(a.get("scene"));
-  const ScanCloud cloud = loadCloud(a.get("cloud"));
+int runScan(const Options& o) {
+  const Scene scene = loadScene(o.scene);
+  const ScanCloud cloud = loadCloud(o.cloud);
   std::vector<Eigen::Vector3d> pts = toDouble(cloud);
   const SurfaceErrorStats e = SurfaceDistance(scene).stats(pts);
   nlohmann::json out;
@@ -174,10 +196,10 @@ int runScan(const Args& a) {
   out["surface_error_max_mm"] = e.max * 1e3;
   out["surface_error_p99_mm"] = e.p99 * 1e3;
   out["surface_error_mean_mm"] = e.mean_abs * 1e3;
-  for (const auto& o : scene.objects) {
-    if (o.model != a.get("sphere-model", "sphere25")) continue;
-    const TriangleMesh mesh = loadValidMesh(o.info.mesh_file);
-    const Eigen::Vector3d center = o.T_base_object * mesh.bounds().center().cast<double>();
+  for (const auto& obj : scene.objects) {
+    if (obj.model != o.sphere_model) continue;
+    const TriangleMesh mesh = loadValidMesh(obj.info.mesh_file);
+    const Eigen::Vector3d center = obj.T_base_object * mesh.bounds().center().cast<double>();
     const double radius = 0.5 * mesh.bounds().sizes().x();
     std::vector<Eigen::Vector3d> sp;
     for (const auto& p : near(cloud, center, radius + 0.003)) {
@@ -187,30 +209,30 @@ int runScan(const Args& a) {
     out["sphere_in_scan"] = sphereJson(f);
     out["mpe_p_mm"] = f.max_abs_dev * 1e3;
   }
-  if (a.kv.count("k")) {
+  if (o.k_given) {
     Scene s = scene;
     LineExtractionConfig line;
     ScannerRenderer renderer(std::make_shared<CellGeometry>(s));
-    for (const auto& o : s.objects) {
-      if (o.model != a.get("sphere-model", "sphere25")) continue;
-      const SphereAcceptance acc = sphereAcceptance(renderer, o, ScannerCalibration::fromScene(s), line, {},
-                                                    std::stoi(a.get("k")), 0.5e-3, true);
+    for (const auto& obj : s.objects) {
+      if (obj.model != o.sphere_model) continue;
+      const SphereAcceptance acc = sphereAcceptance(renderer, obj, ScannerCalibration::fromScene(s), line, {},
+                                                    o.k, 0.5e-3, true);
       out["mpe_al_mm"] = acc.mpe_al * 1e3;
       out["mpe_p_dedicated_sweep_mm"] = acc.mpe_p * 1e3;
-      out["mpe_al_k"] = std::stoi(a.get("k"));
+      out["mpe_al_k"] = o.k;
       out["mpe_al_method"] = "K in-process sphere sweeps (same extraction and triangulation as the nodes), projector turned 360/K apart";
     }
   }
   std::cout << out.dump(2) << "\n";
-  if (a.kv.count("json")) writeFileAtomic(a.get("json"), out.dump(2) + "\n");
+  if (!o.json.empty()) writeFileAtomic(o.json, out.dump(2) + "\n");
   return 0;
 }
 
 // Two clouds of the same scan (live and replayed): same points? Sorted lexicographically and
 // compared point by point; exit 0 when the counts match and every distance ≤ --tolerance-m.
-int runCompare(const Args& a) {
-  ScanCloud x = loadCloud(a.get("a")), y = loadCloud(a.get("b"));
-  const double tol = std::stod(a.get("tolerance-m", "1e-6"));
+int runCompare(const Options& o) {
+  ScanCloud x = loadCloud(o.a), y = loadCloud(o.b);
+  const double tol = o.tolerance_m;
   auto sorted = [](const ScanCloud& c) {
     std::vector<Eigen::Vector3f> p = c.points;
     std::sort(p.begin(), p.end(), [](const Eigen::Vector3f& l, const Eigen::Vector3f& r) {
@@ -230,45 +252,99 @@ int runCompare(const Args& a) {
   return same_count && max_d <= tol ? 0 : 1;
 }
 
-int runCloud(const Args& a) {
-  const ScanCloud c = loadCloud(a.get("cloud"));
-  std::vector<double> ctr;
-  std::stringstream ss(a.get("center"));
-  for (std::string tok; std::getline(ss, tok, ',');) ctr.push_back(std::stod(tok));
+int runCloud(const Options& o) {
+  const ScanCloud c = loadCloud(o.cloud);
+  const std::vector<double>& ctr = o.center;
   if (ctr.size() != 3) throw std::invalid_argument("--center x,y,z (metres) is required");
-  const double r = std::stod(a.get("radius-mm", "12.5")) * 1e-3;
-  const SphereFit f = fitSphere(near(c, {ctr[0], ctr[1], ctr[2]}, r + std::stod(a.get("margin-mm", "3")) * 1e-3));
+  const double r = o.radius_mm * 1e-3;
+  const SphereFit f = fitSphere(near(c, {ctr[0], ctr[1], ctr[2]}, r + o.margin_mm * 1e-3));
   nlohmann::json out = sphereJson(f);
   std::cout << out.dump(2) << "\n";
-  if (a.kv.count("json")) writeFileAtomic(a.get("json"), out.dump(2) + "\n");
+  if (!o.json.empty()) writeFileAtomic(o.json, out.dump(2) + "\n");
   return f.ok ? 0 : 1;
+}
+
+/// --scene, --sphere-model, --k and --json (sim and scan).
+CLI::Option* addCommon(CLI::App* c, Options& o, const std::string& k_help) {
+  c->add_option("--scene", o.scene, "scene YAML")->required()->check(CLI::ExistingFile);
+  c->add_option("--sphere-model", o.sphere_model, "model id of the reference sphere in the scene")->capture_default_str();
+  CLI::Option* k = c->add_option("--k", o.k, k_help)->check(cellsight_tools::positiveInt());
+  c->add_option("--json", o.json, "also write the JSON to this file");
+  return k;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string usage =
-      "usage: cellsight_scanner_accuracy sim --scene S.yaml --trajectories T.yaml [--trajectory demo_sweep|none]\n"
-      "         [--no-noise] [--estimator centroid|gaussian3|run_centre] [--smoothing-degree N]\n"
-      "         [--k 5] [--sphere-step-mm 0.5] [--no-filter] [--ply scan.ply] [--json out.json]\n"
-      "       cellsight_scanner_accuracy scan --scene S.yaml --cloud scan.ply [--k 5] [--json out.json]\n"
-      "       cellsight_scanner_accuracy compare --a live.ply --b replay.ply [--tolerance-m 1e-6]\n"
-      "       cellsight_scanner_accuracy cloud --cloud scan.ply --center x,y,z [--radius-mm 12.5] [--json out.json]\n";
-  if (argc < 2) {
-    std::cerr << usage;
-    return 2;
-  }
-  try {
-    const std::string mode = argv[1];
-    const Args a = parse(argc, argv, 2);
-    if (mode == "sim") return runSim(a);
-    if (mode == "cloud") return runCloud(a);
-    if (mode == "scan") return runScan(a);
-    if (mode == "compare") return runCompare(a);
-    std::cerr << usage;
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 1;
-  }
+  using cellsight_tools::nonNegative;
+  using cellsight_tools::positive;
+  CLI::App app("Scanner acceptance figures (thesis section 1, after CMM tests): surface error, MPE_P, MPE_AL, "
+               "flatness; JSON on stdout.",
+               "cellsight_scanner_accuracy");
+  app.require_subcommand(1);
+
+  Options sim;
+  CLI::App* c_sim = app.add_subcommand(
+      "sim", "scan the simulated scene in-process (the scanner's own extraction and triangulation): surface error "
+             "vs truth, MPE_P and MPE_AL on the reference sphere, flatness of a bare table patch");
+  addCommon(c_sim, sim, "sphere scans, the projector turned 360/K apart")->capture_default_str();
+  c_sim->add_option("--trajectories", sim.trajectories, "trajectories YAML (needed unless --trajectory none)")
+      ->check(CLI::ExistingFile);
+  c_sim->add_option("--trajectory", sim.trajectory, "trajectory of the whole-scene scan; none: skip that scan")
+      ->capture_default_str();
+  c_sim->add_flag("--no-noise", sim.no_noise, "render without the noise model");
+  c_sim->add_option("--estimator", sim.estimator, "line-centre estimator")
+      ->check(cellsight_tools::parsedBy([](const std::string& e) { LineExtractionConfig::parseEstimator(e); },
+                                        "{centroid,gaussian3,run_centre}"))
+      ->capture_default_str();
+  c_sim->add_option("--centroid-floor", sim.line.centroid_floor, "centroid weight floor, share of peak - background")
+      ->check(cellsight_tools::fraction())
+      ->capture_default_str();
+  c_sim->add_option("--background-percentile", sim.line.background_percentile, "background grey level: this histogram quantile")
+      ->check(cellsight_tools::fraction())
+      ->capture_default_str();
+  c_sim->add_option("--smoothing-degree", sim.line.smoothing_degree, "degree of the centre-line smoothing; 0: off")
+      ->check(cellsight_tools::nonNegativeInt())
+      ->capture_default_str();
+  c_sim->add_option("--sphere-step-mm", sim.sphere_step_mm, "flange step of the sphere sweeps [mm]")
+      ->check(positive())
+      ->capture_default_str();
+  c_sim->add_flag("--no-filter", sim.no_filter, "no statistical outlier removal");
+  c_sim->add_option("--ply", sim.ply, "save the whole-scene scan to this cloud file");
+
+  Options scan;
+  CLI::App* c_scan = app.add_subcommand(
+      "scan", "a scan made elsewhere (the ROS demo) against the scene's truth; with --k also the in-process "
+              "K-orientation sphere scans for MPE_AL");
+  CLI::Option* scan_k = addCommon(c_scan, scan, "also K in-process sphere scans for MPE_AL (none without --k)");
+  c_scan->add_option("--cloud", scan.cloud, "the scan (PLY, PCD)")->required()->check(CLI::ExistingFile);
+
+  Options cmp;
+  CLI::App* c_cmp = app.add_subcommand(
+      "compare", "two clouds of the same scan (live, replayed): exit 0 when the counts match and every sorted point "
+                 "is within --tolerance-m");
+  c_cmp->add_option("--a", cmp.a, "first cloud (PLY, PCD)")->required()->check(CLI::ExistingFile);
+  c_cmp->add_option("--b", cmp.b, "second cloud (PLY, PCD)")->required()->check(CLI::ExistingFile);
+  c_cmp->add_option("--tolerance-m", cmp.tolerance_m, "largest distance between paired points [m]")
+      ->check(nonNegative())
+      ->capture_default_str();
+
+  Options cld;
+  CLI::App* c_cld = app.add_subcommand("cloud", "MPE_P / sphere fit on any cloud near a given centre (real data)");
+  c_cld->add_option("--cloud", cld.cloud, "the cloud (PLY, PCD)")->required()->check(CLI::ExistingFile);
+  c_cld->add_option("--center", cld.center, "sphere centre x,y,z [m]")->required()->delimiter(',')->expected(3);
+  c_cld->add_option("--radius-mm", cld.radius_mm, "sphere radius [mm]")->check(positive())->capture_default_str();
+  c_cld->add_option("--margin-mm", cld.margin_mm, "points within radius + margin of the centre are fitted [mm]")
+      ->check(nonNegative())
+      ->capture_default_str();
+  c_cld->add_option("--json", cld.json, "also write the JSON to this file");
+
+  if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
+  scan.k_given = scan_k->count() > 0;
+  return cellsight_tools::runTool([&] {
+    if (c_sim->parsed()) return runSim(sim);
+    if (c_scan->parsed()) return runScan(scan);
+    if (c_cmp->parsed()) return runCompare(cmp);
+    return runCloud(cld);
+  });
 }

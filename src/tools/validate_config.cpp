@@ -1,40 +1,43 @@
 // Loads every YAML under a config folder with its strict loader (scenes, models, trajectories,
 // calibrations) and reports each problem with file and key. Exit 0 only if all are valid.
-// Usage: cellsight_validate_config <config folder> | <file.yaml>...
-#include <dirent.h>
-#include <sys/stat.h>
-
+// Usage: cellsight_validate_config <config folder | file.yaml>...   (--help for details)
+// Folders are searched recursively for *.yaml, in sorted order (names compared bytewise); a path
+// that does not exist is a usage error (CLI11, non-zero exit); no .yaml found: exit 2.
+#include <algorithm>
+#include <filesystem>
 #include <functional>
 #include <iostream>
 #include <string>
 #include <vector>
 
-#include "cellsight/calibration.hpp"
-#include "cellsight/camera_model.hpp"
-#include "cellsight/clustering.hpp"
-#include "cellsight/model_matching.hpp"
-#include "cellsight/scanner_config.hpp"
-#include "cellsight/scene.hpp"
-#include "cellsight/trajectory.hpp"
-#include "cellsight/yaml_reader.hpp"
+#include "cellsight/common/calibration.hpp"
+#include "cellsight/common/camera_model.hpp"
+#include "cellsight/localization/clustering.hpp"
+#include "cellsight/localization/model_matching.hpp"
+#include "cellsight/scanner/scanner_config.hpp"
+#include "cellsight/sim/scene.hpp"
+#include "cellsight/common/trajectory.hpp"
+#include "cellsight/common/yaml_reader.hpp"
+#include "cli_args.hpp"
 
 namespace {
 
+/// *.yaml files under `path` (a file or a folder, searched recursively; links followed), each
+/// folder's entries in sorted order; what cannot be read is skipped.
 void collect(const std::string& path, std::vector<std::string>& out) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return;
-  if (!S_ISDIR(st.st_mode)) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec || !fs::exists(st)) return;
+  if (!fs::is_directory(st)) {
     if (path.size() > 5 && path.substr(path.size() - 5) == ".yaml") out.push_back(path);
     return;
   }
-  DIR* dir = opendir(path.c_str());
-  if (!dir) return;
-  while (dirent* e = readdir(dir)) {
-    const std::string name = e->d_name;
-    if (name == "." || name == "..") continue;
-    collect(path + "/" + name, out);
-  }
-  closedir(dir);
+  std::vector<std::string> names;
+  for (fs::directory_iterator it(path, ec), end; !ec && it != end; it.increment(ec))
+    names.push_back(it->path().filename().string());
+  std::sort(names.begin(), names.end());
+  for (const auto& name : names) collect(path + "/" + name, out);
 }
 
 }  // namespace
@@ -76,12 +79,15 @@ std::string validateFile(const std::string& f) {
 }
 
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::cerr << "usage: cellsight_validate_config <config folder | file.yaml>...\n";
-    return 2;
-  }
+  std::vector<std::string> paths;
+  CLI::App app("Loads every YAML under the given folders (recursively) and files with its strict loader (scenes, "
+               "models, trajectories, calibrations, settings) and reports each problem with file and key. Exit 0 "
+               "only if all are valid.",
+               "cellsight_validate_config");
+  app.add_option("paths", paths, "config folders and/or .yaml files")->required()->check(CLI::ExistingPath);
+  if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
   std::vector<std::string> files;
-  for (int i = 1; i < argc; ++i) collect(argv[i], files);
+  for (const auto& p : paths) collect(p, files);
   if (files.empty()) {
     std::cerr << "no .yaml files found\n";
     return 2;

@@ -11,8 +11,9 @@
 #include "cellsight/ClusterArray.h"
 #include "cellsight/DetectionArray.h"
 #include "cellsight/LocateObjects.h"
-#include "cellsight/localization_eval.hpp"
-#include "cellsight/model_matching.hpp"
+#include <dynamic_reconfigure/Reconfigure.h>
+#include "cellsight/localization/localization_eval.hpp"
+#include "cellsight/localization/model_matching.hpp"
 #include "cellsight_ros/conversions.hpp"
 
 namespace {
@@ -41,7 +42,7 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   ASSERT_TRUE(locate.waitForExistence(ros::Duration(90)));
   cellsight::LocateObjects srv;
   ASSERT_TRUE(locate.call(srv));
-  EXPECT_FALSE(srv.response.success);
+  EXPECT_EQ(srv.response.status, cellsight::LocateObjects::Response::NO_CLUSTERS);
   EXPECT_NE(srv.response.message.find("no clusters"), std::string::npos) << srv.response.message;
 
   // the scanner camera of the demo cell, as calibration_publisher would send it
@@ -65,11 +66,13 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   cellsight::ClusterArray clusters;
   clusters.header.frame_id = "base_link";
   clusters.header.stamp = ros::Time::now();
-  clusters.clouds.push_back(cellsight_ros::toCloudMsg(view, clusters.header.stamp));
-  clusters.clouds.back().header.frame_id = "base_link";
+  clusters.clusters.emplace_back();
+  clusters.clusters.back().cloud = cellsight_ros::toCloudMsg(view, clusters.header.stamp);
+  clusters.clusters.back().cloud.header.frame_id = "base_link";
   cellsight::ScanCloud nan;
   for (int i = 0; i < 20; ++i) nan.append(Eigen::Vector3f::Constant(NAN), 0.f);
-  clusters.clouds.push_back(cellsight_ros::toCloudMsg(nan, clusters.header.stamp));
+  clusters.clusters.emplace_back();
+  clusters.clusters.back().cloud = cellsight_ros::toCloudMsg(nan, clusters.header.stamp);
   auto pub = nh.advertise<cellsight::ClusterArray>("clusters", 1, true);
   ros::WallDuration(1.0).sleep();
   pub.publish(clusters);
@@ -85,15 +88,37 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   EXPECT_LT(e.rotation, 1 * M_PI / 180);
   EXPECT_FALSE(det->warnings.empty());  // the all-NaN cluster is named
 
-  EXPECT_TRUE(buffer.canTransform("base_link", "object/0", clusters.header.stamp, ros::Duration(5)));
+  EXPECT_EQ(det->detections[0].name, "object/bracket_0");
+  EXPECT_TRUE(buffer.canTransform("base_link", "object/bracket_0", clusters.header.stamp, ros::Duration(5)));
+  // re-published: the frame is still there, at a later time, with nothing new scanned
+  ros::WallDuration(1.0).sleep();
+  EXPECT_TRUE(buffer.canTransform("base_link", "object/bracket_0", ros::Time(0), ros::Duration(2)));
+  EXPECT_GT(buffer.lookupTransform("base_link", "object/bracket_0", ros::Time(0)).header.stamp, clusters.header.stamp);
 
   srv.request.models = {"no_such_part"};
   ASSERT_TRUE(locate.call(srv));
-  EXPECT_FALSE(srv.response.success);
+  EXPECT_EQ(srv.response.status, cellsight::LocateObjects::Response::UNKNOWN_MODEL);
   EXPECT_NE(srv.response.message.find("unknown model 'no_such_part'"), std::string::npos) << srv.response.message;
   srv.request.models = {"bracket"};
   ASSERT_TRUE(locate.call(srv));
-  EXPECT_TRUE(srv.response.success) << srv.response.message;
+  EXPECT_EQ(srv.response.status, cellsight::LocateObjects::Response::OK) << srv.response.message;
+  EXPECT_EQ(srv.response.detections.detections.size(), 1u);
+
+  // dynamic_reconfigure: a 10 um RMSE limit rejects the (20 um noise) view, the shipped one accepts it again
+  auto reconfigure = nh.serviceClient<dynamic_reconfigure::Reconfigure>("model_matching/set_parameters");
+  ASSERT_TRUE(reconfigure.waitForExistence(ros::Duration(10)));
+  dynamic_reconfigure::Reconfigure rc;
+  dynamic_reconfigure::DoubleParameter rmse;
+  rmse.name = "max_rmse";
+  rmse.value = 1e-5;
+  rc.request.config.doubles.push_back(rmse);
+  ASSERT_TRUE(reconfigure.call(rc));
+  ASSERT_TRUE(locate.call(srv));
+  EXPECT_EQ(srv.response.status, cellsight::LocateObjects::Response::OK) << srv.response.message;
+  EXPECT_EQ(srv.response.detections.detections.size(), 0u) << "max_rmse 10 um should reject the view";
+  rc.request.config.doubles[0].value = 0.0015;
+  ASSERT_TRUE(reconfigure.call(rc));
+  ASSERT_TRUE(locate.call(srv));
   EXPECT_EQ(srv.response.detections.detections.size(), 1u);
 
   // no transform for this frame: dropped (no detections for this stamp), the node keeps serving
@@ -103,7 +128,7 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   EXPECT_FALSE(waitForDetections(clusters.header.stamp, 5));
   srv.request.models = {};
   ASSERT_TRUE(locate.call(srv));
-  EXPECT_FALSE(srv.response.success);
+  EXPECT_EQ(srv.response.status, cellsight::LocateObjects::Response::NO_TRANSFORM);
   EXPECT_NE(srv.response.message.find("no transform"), std::string::npos) << srv.response.message;
 }
 

@@ -1,0 +1,191 @@
+// Model matching: a coarse pose per model and cluster — point pair feature voting (default), or
+// the thesis's FPFH correspondences + RANSAC (Algorithm 5.1), or Open3D's FGR — hypotheses scored
+// against a precomputed distance field of the model, robust point-to-plane ICP with an exact mesh
+// polish, centring in the pose's slack, and validation by fitness over the model's *visible*
+// surface (single-view scans see a part from one side), scene coverage and RMSE. Symmetric parts
+// are reported in a canonical pose. One stage per file: docs/localization.md.
+// PCL and Embree stay inside the stage files of src/localization/matching/.
+#pragma once
+#include <Eigen/Geometry>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "cellsight/localization/model_library.hpp"
+#include "cellsight/common/scan_cloud.hpp"
+
+namespace cellsight {
+
+struct MatchingConfig {
+  double voxel = 0.002;            ///< m, coarse resolution of scene and model for descriptors
+  double normal_radius = 0.005;    ///< m, scene normals
+  double feature_radius = 0.010;   ///< m, FPFH support
+  /// Neighbour search over the cluster's points for its normals and the fitness test: "grid"
+  /// (a uniform grid, PointGrid; default) or "kdtree" (PCL NormalEstimation and a FLANN k-d
+  /// tree, the library path kept for comparison). Same normals; the grid took 0.6 ms where
+  /// PCL took 6 ms on a 2 300-point part (docs/localization.md).
+  std::string scene_search = "grid";
+  bool mutual_filter = true;       ///< keep descriptor matches that are nearest both ways
+  int min_correspondences = 12;    ///< below this the mutual filter is relaxed to one-way
+  /// Coarse alignment: "ppf" (point pair feature voting, default), "ransac" (FPFH
+  /// correspondences + RANSAC, the thesis's method) or "fgr" (FPFH + fast global registration).
+  std::string coarse = "ppf";
+  double ppf_sampling = 0.0035;      ///< m, points of model and scene paired
+  double ppf_distance_step = 0.003;  ///< m, pair distance quantisation
+  int ppf_angle_bins = 30;           ///< angle quantisation (12°) and rotation bins
+  int ppf_ref_step = 4;              ///< every n-th scene point is a reference
+  /// model pairs one feature may hold; a feature shared by more (two points of one large flat
+  /// face differ only in their distance) says little about the pose and is left out of the table
+  int ppf_max_bucket = 64;
+  /// best-voted poses scored on the distance field, on a quarter of the scene points (at least
+  /// 300) in a fixed random order; a pose whose first 64 explain less than half the best pose's
+  /// share stops there
+  int ppf_candidates = 100;
+  int max_iterations = 100000;     ///< RANSAC hypotheses at most
+  double confidence = 0.999;       ///< adaptive RANSAC termination
+  double edge_similarity = 0.9;    ///< pre-rejection: edge length ratio scene/model
+  double normal_tolerance = 0.5;   ///< rad, pre-rejection normal consistency
+  double inlier_distance = 0.003;  ///< m, coarse inlier threshold (≈ 1.5 voxel)
+  int refine_candidates = 3;       ///< distinct coarse hypotheses refined by ICP per model
+  double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
+  int icp_iterations = 40;
+  double icp_max_points = 4000;    ///< scene points used by the final ICP (thinned evenly above this)
+  double icp_screen_points = 1000; ///< scene points used to refine and rank the coarse candidates
+  /// Final exact iterations after the distance field converged (the mesh's closest point, see
+  /// icp_mesh_polish; k-d tree neighbours for cloud models).
+  int icp_exact_iterations = 6;
+  double icp_huber_floor = 0.0005;  ///< m; smallest Huber scale of the ICP residuals
+  /// The exact polish measures to the closest point of the model's mesh (Embree point query):
+  /// scan points beyond a face's edge are pulled back over it. false: to the nearest fine
+  /// sample's tangent plane, which runs on past the edge. Cloud models always use the samples.
+  bool icp_mesh_polish = true;
+  /// After the polish, move an accepted pose to the middle of its slack: the directions the
+  /// scanned faces constrain weakly (eigenvalues of their point-to-plane normal matrix below
+  /// icp_slack_eigen_ratio of the largest: a flat top's two shifts and turn) are followed up to
+  /// icp_slack_range each way to where scan points leave the mesh by icp_slack_tolerance, and
+  /// the pose goes halfway (mesh models only).
+  bool icp_centre_slack = true;
+  double icp_slack_range = 0.005;       ///< m (turns: the same arc at half the part's diameter)
+  double icp_slack_tolerance = 0.0001;  ///< m
+  double icp_slack_eigen_ratio = 0.01;
+  int icp_slack_steps = 8;              ///< bisection steps in the bracket
+  /// The polish's closest points from a grid of candidate triangles per cell (ClosestPointGrid,
+  /// exact; meshes up to 5 000 faces) instead of Embree's BVH point query for every point
+  /// (false: the library path, kept for comparison). Same answers, measured faster on the part
+  /// meshes (docs/localization.md).
+  bool closest_point_grid = true;
+  double fitness_radius = 0.002;   ///< m, r_F
+  double min_fitness = 0.35;       ///< share of the model's visible points matched (laser shadows hide some)
+  double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)
+  double max_rmse = 0.0015;        ///< m, point-to-plane RMS of the inliers
+  bool check_visibility = true;    ///< fitness over points the viewpoint can see
+  /// Parts rest on a support (the table the clustering removed): a pose that puts the model more
+  /// than this below the support plane is not physical and is discarded before validation
+  /// (a thin flat part seen from above fits upside down as well). Used when locate() is given
+  /// the plane; metres.
+  double max_support_penetration = 0.003;
+  Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
+  double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
+  int max_instances = 3;           ///< detections per cluster (touching parts)
+  int min_instance_points = 60;    ///< leftover cluster points worth another search
+  /// Larger clusters (a whole scene of millions of points sent to the service) are thinned to a
+  /// voxel grid of icp_spacing, then evenly, to at most this many points, with a warning: time
+  /// and memory stay bounded.
+  double max_cluster_points = 300000;
+  int threads = 0;                 ///< 0: hardware concurrency
+  uint64_t seed = 42;
+};
+
+struct PartDetection {
+  std::string model;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< T_scene_model (canonical)
+  double fitness = 0;    ///< share of visible model points within r_F of the scene
+  double coverage = 0;   ///< share of the cluster's points explained by the model
+  double rmse = 0;       ///< m
+  double score = 0;      ///< fitness × coverage (ranking)
+  int cluster = -1;      ///< index of the input cluster
+  int iterations = 0;    ///< RANSAC hypotheses drawn
+  std::string matcher;   ///< the coarse stage: "ppf", "ransac" or "fgr"
+  double coarse_seconds = 0, refine_seconds = 0;  ///< CPU time of the stages for this pair
+};
+
+struct MatchStats {
+  double seconds = 0;
+  /// CPU seconds per stage, summed over clusters and (cluster, model) pairs (threads overlap):
+  /// scene preparation (voxels, normals), coarse (PPF/RANSAC/FGR), refinement (ICP, validation)
+  double scene_seconds = 0, coarse_seconds = 0, refine_seconds = 0;
+  size_t pairs = 0, pairs_skipped_by_size = 0;
+  std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
+  std::vector<std::string> warnings;
+};
+
+/// Symmetry-aware pose error about the model centroid: translation of the centroid (m) and
+/// rotation (rad; none: full, discrete: best of the n equivalent rotations, axial: angle between
+/// the axes, spherical: 0).
+struct PoseError {
+  double translation = 0, rotation = 0;
+};
+PoseError poseError(const ModelInfo& info, const Eigen::Vector3d& centroid, const Eigen::Isometry3d& estimate,
+                    const Eigen::Isometry3d& truth);
+
+/// The canonical representative of a symmetric pose: axial and discrete symmetries turn about
+/// the model's axis (through its origin) so that the model x axis points as close to the scene
+/// +x as the symmetry allows; spherical ones keep the centre and take the identity rotation.
+Eigen::Isometry3d canonicalPose(const ModelInfo& info, const Eigen::Vector3d& centroid, const Eigen::Isometry3d& pose);
+
+/// The acceptance thresholds of the validation stage: the settings that may change while a
+/// matcher runs (model_matching's dynamic_reconfigure), without rebuilding any model data.
+struct AcceptanceThresholds {
+  double min_fitness = 0.35;
+  double min_coverage = 0.6;
+  double max_rmse = 0.0015;  ///< m
+  int max_instances = 3;
+};
+AcceptanceThresholds acceptanceOf(const MatchingConfig& c);
+/// The rules loadMatchingConfig applies to these keys: {"", ""} when valid, else {key, why}.
+std::pair<std::string, std::string> checkAcceptance(const AcceptanceThresholds& t);
+
+class ModelMatcher {
+ public:
+  ModelMatcher(std::shared_ptr<const ModelLibrary> library, const MatchingConfig& config);
+  ~ModelMatcher();
+
+  const MatchingConfig& config() const { return config_; }
+  /// Replaces the acceptance thresholds for later locate() calls (not while one runs); throws
+  /// ConfigError naming the key when checkAcceptance() refuses them.
+  void setAcceptance(const AcceptanceThresholds& t);
+
+  /// Finds instances of `models` (empty: all) in each cluster; clusters × models run in
+  /// parallel. Throws std::out_of_range for an unknown model id (before any work). Empty or
+  /// all-NaN clusters give a warning and no detection.
+  /// `viewpoint` (scene frame) overrides config().viewpoint for this call. `support_plane`
+  /// (a, b, c, d of a·x + b·y + c·z + d = 0, unit normal pointing up, scene frame), when given,
+  /// discards poses that sink the model into the support (see max_support_penetration).
+  std::vector<PartDetection> locate(const std::vector<ScanCloud>& clusters, const std::vector<std::string>& models,
+                                MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
+                                const Eigen::Vector4f* support_plane = nullptr) const;
+
+  /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
+  /// first locate(); unknown ids throw std::out_of_range.
+  void prepare(const std::vector<std::string>& models) const;
+
+  /// Centroid of the model's surface (model frame), for errors and grasping.
+  Eigen::Vector3d centroid(const std::string& model) const;
+
+  struct ModelIndex;  // per-model data built once: clouds, descriptors, distance field, ray caster
+
+ private:
+  std::shared_ptr<const ModelIndex> index(const std::string& id) const;
+
+  std::shared_ptr<const ModelLibrary> library_;
+  MatchingConfig config_;
+  mutable std::mutex mutex_;
+  mutable std::map<std::string, std::shared_ptr<const ModelIndex>> indices_;
+};
+
+/// Strict loader of config/matching.yaml (ConfigError names file and key).
+MatchingConfig loadMatchingConfig(const std::string& path);
+
+}  // namespace cellsight

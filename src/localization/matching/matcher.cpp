@@ -1,0 +1,343 @@
+// ModelMatcher: the per-model index built once, one (cluster, model) pair from coarse stage to
+// validated pose, and locate() over clusters, models and instances.
+#include <pcl/features/normal_3d.h>
+#include <pcl/search/kdtree.h>
+
+#include <stdexcept>
+
+#include "cellsight/localization/fgr.hpp"
+#include "matching_internal.hpp"
+
+namespace cellsight {
+namespace matching_detail {
+namespace {
+
+PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                    const Eigen::Vector4f* support, uint64_t seed) {
+  PartDetection d;
+  d.model = m.id;
+  d.matcher = cfg.coarse;
+  std::vector<Hypothesis> candidates;
+  const auto t_coarse = Clock::now();
+  if (cfg.coarse == "ppf") {
+    candidates = ppfHypotheses(s, m, cfg, support, &d.iterations);
+  } else if (cfg.coarse == "fgr") {
+    std::vector<Vec3> sp, mp;
+    std::vector<Fpfh> sf, mf;
+    for (int i : s.fpfh_valid) {
+      sp.push_back(s.coarse.points[i]);
+      sf.push_back(s.fpfh[i]);
+    }
+    for (int i : m.fpfh_valid) {
+      mp.push_back(m.coarse->points[i]);
+      mf.push_back(m.fpfh[i]);
+    }
+    FgrOptions o;
+    o.max_correspondence_distance = cfg.inlier_distance;
+    o.seed = static_cast<int>(seed % 1000003);
+    Hypothesis h;
+    try {
+      h.T = fastGlobalRegistration(mp, mf, sp, sf, o).cast<float>();
+      candidates.push_back(h);
+    } catch (const std::exception&) {
+      // Open3D throws when too few matches survive its tuple test: no hypothesis
+    }
+    d.iterations = o.iterations;
+  } else {
+    candidates = ransac(s, m, correspondences(s, m, cfg), cfg, seed, &d.iterations);
+  }
+  d.coarse_seconds = seconds(t_coarse);
+  const auto t_refine = Clock::now();
+  double best = -1;
+  // Every candidate is refined on a thinned scene (distance-field neighbours only) and scored;
+  // the best one is then refined on all the ICP points and polished with exact neighbours.
+  auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, PartDetection* c) {
+    Refined r = icp(s, m, T0, cfg, points, polish);
+    if (!r.T.matrix().allFinite()) return false;
+    if (support && belowSupport(m, r.T, *support) > cfg.max_support_penetration) return false;
+    auto score = [&](const Eigen::Isometry3f& T, PartDetection* out) {
+      *out = d;
+      out->pose = T.cast<double>();
+      out->rmse = r.rmse;
+      out->coverage = coverage(s, m, T, cfg.fitness_radius);
+      out->fitness = visibleFitness(s, m, T, cfg);
+      out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
+    };
+    score(r.T, c);
+    // a polished pose good enough to report goes to the middle of its slack (kept if it still is)
+    if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {
+      const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, r.polished_fresh, cfg).inverse()).cast<float>();
+      PartDetection centred;
+      if (T.matrix().allFinite() && !(support && belowSupport(m, T, *support) > cfg.max_support_penetration)) {
+        score(T, &centred);
+        if (accepted(centred, cfg)) *c = centred;
+      }
+    }
+    return true;
+  };
+  const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
+  const size_t screen_points = std::min(all_points, static_cast<size_t>(std::max(100.0, cfg.icp_screen_points)));
+  PartDetection chosen = d;
+  for (const auto& h : candidates) {
+    if (!h.T.matrix().allFinite()) continue;
+    PartDetection c;
+    if (evaluate(h.T, screen_points, false, &c) && c.score > best) {
+      best = c.score;
+      chosen = c;
+    }
+  }
+  PartDetection fine;
+  if (best < 0) {
+    fine = d;
+  } else if (!evaluate(chosen.pose.cast<float>(), all_points, true, &fine)) {
+    fine = chosen;
+  }
+  fine.refine_seconds = seconds(t_refine);
+  return fine;
+}
+
+}  // namespace
+}  // namespace matching_detail
+
+using namespace matching_detail;  // the stages and their data (matching_internal.hpp)
+
+ModelMatcher::ModelMatcher(std::shared_ptr<const ModelLibrary> library, const MatchingConfig& config)
+    : library_(std::move(library)), config_(config) {
+  if (!library_) throw std::invalid_argument("ModelMatcher: no model library");
+  if (config_.coarse != "ppf" && config_.coarse != "ransac" && config_.coarse != "fgr") {
+    throw std::invalid_argument("ModelMatcher: coarse must be 'ppf', 'ransac' or 'fgr' (got '" + config_.coarse + "')");
+  }
+  if (config_.scene_search != "grid" && config_.scene_search != "kdtree") {
+    throw std::invalid_argument("ModelMatcher: scene_search must be 'grid' or 'kdtree' (got '" + config_.scene_search + "')");
+  }
+  if (config_.threads <= 0) config_.threads = std::max(1u, std::thread::hardware_concurrency());
+}
+
+ModelMatcher::~ModelMatcher() = default;
+
+std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::string& id) const {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = indices_.find(id);
+    if (it != indices_.end()) return it->second;
+  }
+  const ModelEntry& e = library_->model(id);
+  auto m = std::make_shared<ModelIndex>();
+  m->id = id;
+  m->info = e.info;
+  m->fine = library_->cloud(id, config_.icp_spacing);
+  {
+    // Descriptors see the model as a scan sees it: PCA normals over normal_radius (not the
+    // mesh's sharp face normals), turned outwards; computed on the coarse cloud like the scene's.
+    auto coarse = std::make_shared<ScanCloud>(*library_->cloud(id, config_.voxel));
+    auto pts = toXyz(coarse->points);
+    pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+    ne.setInputCloud(pts);
+    ne.setSearchSurface(toXyz(m->fine->points));
+    ne.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+    ne.setRadiusSearch(config_.normal_radius);
+    pcl::PointCloud<pcl::Normal> normals;
+    ne.compute(normals);
+    for (size_t i = 0; i < coarse->size(); ++i) {
+      Vec3 n = normals[i].getNormalVector3fMap();
+      if (!n.allFinite() || n.norm() < 0.5f) continue;
+      n.normalize();
+      coarse->normals[i] = n.dot(coarse->normals[i]) < 0 ? -n : n;
+    }
+    m->coarse = coarse;
+  }
+  if (config_.coarse == "ppf") {
+    m->ppf_cloud = thinned(*m->coarse, config_.ppf_sampling);
+    m->ppf = buildPpf(m->ppf_cloud, static_cast<float>(config_.ppf_distance_step), config_.ppf_angle_bins,
+                      static_cast<size_t>(config_.ppf_max_bucket));
+  } else {
+    m->fpfh = computeFpfh(*m->coarse, config_.feature_radius);
+    std::vector<Fpfh> valid;
+    for (size_t i = 0; i < m->fpfh.size(); ++i) {
+      if (!validFpfh(m->fpfh[i])) continue;
+      m->fpfh_valid.push_back(static_cast<int>(i));
+      valid.push_back(m->fpfh[i]);
+    }
+    if (!valid.empty()) m->fpfh_tree.setInputCloud(toPclFpfh(valid));
+  }
+  m->fine_tree.setInputCloud(toXyz(m->fine->points));
+  // the surface centroid: exact from the mesh (a mean of the random fine samples is off by
+  // ~R/sqrt(3N), 0.08 mm on the 25 mm sphere, which turns into pose error wherever a symmetry
+  // leaves the rotation free); the mean of the points for a cloud model
+  if (!e.mesh.faces.empty() && e.mesh.area() > 0) {
+    m->centroid = e.mesh.surfaceCentroid();
+  } else {
+    for (const auto& p : m->fine->points) m->centroid += p.cast<double>();
+    if (!m->fine->points.empty()) m->centroid /= static_cast<double>(m->fine->size());
+  }
+  m->diameter = e.bounds.diagonal().norm();
+  if (!e.mesh.faces.empty()) {
+    for (const auto& v : e.mesh.vertices) m->extremes.push_back(v.cast<float>());
+  } else {
+    m->extremes = m->coarse->points;
+  }
+  // distance field: cells of ≈ 1/3 of the coarse inlier distance (at most 4 M cells); each
+  // fine point claims the cells within the margin whose centre it is nearest to
+  const float margin = static_cast<float>(std::max(2 * config_.inlier_distance, 6 * config_.icp_spacing));
+  const Eigen::Vector3f lo = e.bounds.min() - Vec3::Constant(margin), hi = e.bounds.max() + Vec3::Constant(margin);
+  const Eigen::Vector3f size = hi - lo;
+  float cell = static_cast<float>(std::max(config_.icp_spacing, config_.inlier_distance / 3));
+  cell = std::max(cell, std::cbrt(size.prod() / 4e6f));
+  m->field.origin = lo;
+  m->field.cell = cell;
+  m->field.dims = (size / cell).array().ceil().cast<int>().max(1);
+  const Eigen::Vector3i D = m->field.dims;
+  m->field.nearest.assign(static_cast<size_t>(D.x()) * D.y() * D.z(), -1);
+  std::vector<float> best(m->field.nearest.size(), margin * margin);
+  const int r = static_cast<int>(std::ceil(margin / cell));
+  for (size_t j = 0; j < m->fine->size(); ++j) {
+    const Vec3& p = m->fine->points[j];
+    const Eigen::Vector3i c = ((p - lo) / cell).array().floor().cast<int>();
+    for (int z = std::max(0, c.z() - r); z <= std::min(D.z() - 1, c.z() + r); ++z) {
+      for (int y = std::max(0, c.y() - r); y <= std::min(D.y() - 1, c.y() + r); ++y) {
+        for (int x = std::max(0, c.x() - r); x <= std::min(D.x() - 1, c.x() + r); ++x) {
+          const size_t k = (static_cast<size_t>(z) * D.y() + y) * D.x() + x;
+          const float d2 = (lo + cell * Vec3(x + 0.5f, y + 0.5f, z + 0.5f) - p).squaredNorm();
+          if (d2 < best[k]) {
+            best[k] = d2;
+            m->field.nearest[k] = static_cast<int32_t>(j);
+          }
+        }
+      }
+    }
+  }
+  m->has_mesh = !e.mesh.faces.empty();
+  if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
+  m->caster.commit();
+  if (m->has_mesh) m->faces = planarFaces(e.mesh);
+  if (m->has_mesh && config_.icp_mesh_polish && config_.closest_point_grid && e.mesh.faces.size() <= 5000) {
+    const float dmin = static_cast<float>(std::max(3 * config_.icp_spacing, 0.5 * config_.fitness_radius));
+    const float cell = static_cast<float>(std::max(2 * config_.icp_spacing, 0.001));
+    // margin: the polish's smallest correspondence distance and a cell (farther points are
+    // rare in the polish: the RayCaster answers them)
+    m->closest = ClosestPointGrid(e.mesh, cell, dmin + cell);
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  return indices_.emplace(id, m).first->second;
+}
+
+void ModelMatcher::prepare(const std::vector<std::string>& models_in) const {
+  const std::vector<std::string> models = models_in.empty() ? library_->ids() : models_in;
+  for (const auto& id : models) library_->model(id);
+  for (const auto& id : models) index(id);
+}
+
+Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return index(model)->centroid; }
+
+std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
+                                            const std::vector<std::string>& models_in, MatchStats* stats,
+                                            const Eigen::Vector3f* viewpoint, const Eigen::Vector4f* support_plane) const {
+  const auto t0 = Clock::now();
+  MatchingConfig cfg = config_;
+  if (viewpoint) cfg.viewpoint = *viewpoint;
+  MatchStats local;
+  MatchStats& st = stats ? *stats : local;
+  st = MatchStats();
+  std::vector<std::string> models = models_in.empty() ? library_->ids() : models_in;
+  for (const auto& id : models) library_->model(id);  // unknown id: throws before any work
+  std::vector<std::shared_ptr<const ModelIndex>> idx(models.size());
+  parallelFor(models.size(), cfg.threads, [&](size_t i) { idx[i] = index(models[i]); });
+
+  struct Work {
+    int cluster;
+    std::vector<Vec3> points;
+    std::unique_ptr<SceneData> scene;
+    double scene_seconds = 0;
+    std::vector<PartDetection> per_model;
+  };
+  std::vector<PartDetection> out;
+  std::vector<Work> round;
+  for (size_t c = 0; c < clusters.size(); ++c) {
+    Work w;
+    w.cluster = static_cast<int>(c);
+    for (const auto& p : clusters[c].points) {
+      if (p.allFinite()) w.points.push_back(p);
+    }
+    if (w.points.size() < 3) {
+      st.warnings.push_back("cluster " + std::to_string(c) + ": " + std::to_string(w.points.size()) +
+                            " finite points, nothing to match");
+      continue;
+    }
+    const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
+    if (w.points.size() > cap) {
+      const size_t before = w.points.size();
+      w.points = capPoints(w.points, cfg.icp_spacing, cap);
+      st.warnings.push_back("cluster " + std::to_string(c) + ": " + std::to_string(before) +
+                            " points, above max_cluster_points " + std::to_string(cap) + ": thinned to " +
+                            std::to_string(w.points.size()) + " (crop the scene or raise the limit)");
+    }
+    round.push_back(std::move(w));
+  }
+  for (int instance = 0; instance < std::max(1, cfg.max_instances) && !round.empty(); ++instance) {
+    parallelFor(round.size(), cfg.threads, [&](size_t i) {
+      const auto t = Clock::now();
+      round[i].scene = prepareScene(round[i].points, cfg);
+      round[i].scene_seconds = seconds(t);
+    });
+    for (const auto& w : round) st.scene_seconds += w.scene_seconds;
+    std::vector<std::pair<size_t, size_t>> pairs;
+    for (size_t w = 0; w < round.size(); ++w) {
+      round[w].per_model.assign(models.size(), PartDetection());
+      for (size_t m = 0; m < models.size(); ++m) {
+        const bool too_big = cfg.min_coverage > 0 &&
+                             round[w].scene->diameter > 1.15f * idx[m]->diameter + 2 * static_cast<float>(cfg.voxel);
+        if (too_big) {
+          ++st.pairs_skipped_by_size;
+          continue;
+        }
+        pairs.emplace_back(w, m);
+      }
+    }
+    st.pairs += pairs.size();
+    parallelFor(pairs.size(), cfg.threads, [&](size_t k) {
+      const auto [w, m] = pairs[k];
+      if (round[w].scene->coarse.size() < 3) return;
+      const uint64_t seed = cfg.seed + 7919 * static_cast<uint64_t>(round[w].cluster) + 104729 * m + 15485863ull * instance;
+      round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], cfg, support_plane, seed);
+      round[w].per_model[m].cluster = round[w].cluster;
+    });
+    std::vector<Work> next;
+    for (auto& w : round) {
+      const PartDetection* best = nullptr;
+      size_t best_m = 0;
+      for (size_t m = 0; m < models.size(); ++m) {
+        const PartDetection& d = w.per_model[m];
+        st.coarse_seconds += d.coarse_seconds;
+        st.refine_seconds += d.refine_seconds;
+        if (!d.model.empty() && !accepted(d, cfg)) st.rejected.push_back(d);
+        if (accepted(d, cfg) && (!best || d.score > best->score)) {
+          best = &d;
+          best_m = m;
+        }
+      }
+      if (!best) continue;
+      PartDetection d = *best;
+      // leftover points (another part touching this one) get another search
+      const ModelIndex& mi = *idx[best_m];
+      const Eigen::Isometry3f Ti = d.pose.cast<float>().inverse();
+      const float r2 = static_cast<float>(4 * cfg.fitness_radius * cfg.fitness_radius);
+      Work rest;
+      rest.cluster = w.cluster;
+      for (const auto& p : w.points) {
+        const Vec3 q = Ti * p;
+        const int j = mi.field.lookup(q);
+        if (j < 0 || (q - mi.fine->points[j]).squaredNorm() > r2) rest.points.push_back(p);
+      }
+      d.pose = canonicalPose(mi.info, mi.centroid, d.pose);
+      out.push_back(d);
+      if (cfg.min_coverage > 0 && static_cast<int>(rest.points.size()) >= cfg.min_instance_points) {
+        next.push_back(std::move(rest));
+      }
+    }
+    round = std::move(next);
+  }
+  st.seconds = seconds(t0);
+  return out;
+}
+
+}  // namespace cellsight

@@ -1,0 +1,99 @@
+// Strict loader of config/matching.yaml into a MatchingConfig.
+#include "cellsight/common/errors.hpp"
+#include "cellsight/common/yaml_reader.hpp"
+#include "cellsight/localization/model_matching.hpp"
+
+namespace cellsight {
+
+AcceptanceThresholds acceptanceOf(const MatchingConfig& c) {
+  return {c.min_fitness, c.min_coverage, c.max_rmse, c.max_instances};
+}
+
+std::pair<std::string, std::string> checkAcceptance(const AcceptanceThresholds& t) {
+  if (!(t.min_fitness >= 0 && t.min_fitness <= 1)) return {"min_fitness", "must be in [0, 1]"};
+  if (!(t.min_coverage >= 0 && t.min_coverage <= 1)) return {"min_coverage", "must be in [0, 1]"};
+  if (!(t.max_rmse > 0)) return {"max_rmse", "must be > 0"};
+  if (t.max_instances < 1) return {"max_instances", "must be >= 1"};
+  return {"", ""};
+}
+
+void ModelMatcher::setAcceptance(const AcceptanceThresholds& t) {
+  if (const auto bad = checkAcceptance(t); !bad.first.empty()) throw ConfigError(bad.first + " " + bad.second);
+  config_.min_fitness = t.min_fitness;
+  config_.min_coverage = t.min_coverage;
+  config_.max_rmse = t.max_rmse;
+  config_.max_instances = t.max_instances;
+}
+
+MatchingConfig loadMatchingConfig(const std::string& path) {
+  YamlMap m(loadYamlFile(path), path);
+  MatchingConfig c;
+  auto positive = [&](const char* key, double& v) {
+    v = m.getDouble(key, v);
+    if (!(v > 0)) m.fail(key, "must be > 0");
+  };
+  auto atLeast = [&](const char* key, int& v, int lowest) {
+    v = m.getInt(key, v);
+    if (v < lowest) m.fail(key, "must be >= " + std::to_string(lowest));
+  };
+  auto share = [&](const char* key, double& v) {
+    v = m.getDouble(key, v);
+    if (!(v >= 0 && v <= 1)) m.fail(key, "must be in [0, 1]");
+  };
+  positive("voxel", c.voxel);
+  c.scene_search = m.getString("scene_search", c.scene_search);
+  if (c.scene_search != "grid" && c.scene_search != "kdtree") m.fail("scene_search", "must be grid or kdtree");
+  positive("normal_radius", c.normal_radius);
+  positive("feature_radius", c.feature_radius);
+  c.mutual_filter = m.getBool("mutual_filter", c.mutual_filter);
+  c.min_correspondences = m.getInt("min_correspondences", c.min_correspondences);
+  c.coarse = m.getString("coarse", c.coarse);
+  if (c.coarse != "ppf" && c.coarse != "ransac" && c.coarse != "fgr") m.fail("coarse", "must be ppf, ransac or fgr");
+  positive("ppf_sampling", c.ppf_sampling);
+  positive("ppf_distance_step", c.ppf_distance_step);
+  c.ppf_angle_bins = m.getInt("ppf_angle_bins", c.ppf_angle_bins);
+  if (c.ppf_angle_bins < 4 || c.ppf_angle_bins > 255) m.fail("ppf_angle_bins", "must be in [4, 255]");
+  c.ppf_ref_step = m.getInt("ppf_ref_step", c.ppf_ref_step);
+  if (c.ppf_ref_step < 1) m.fail("ppf_ref_step", "must be >= 1");
+  atLeast("ppf_max_bucket", c.ppf_max_bucket, 1);
+  atLeast("ppf_candidates", c.ppf_candidates, 1);
+  atLeast("max_iterations", c.max_iterations, 1);
+  c.confidence = m.getDouble("confidence", c.confidence);
+  if (!(c.confidence > 0 && c.confidence < 1)) m.fail("confidence", "must be in (0, 1)");
+  share("edge_similarity", c.edge_similarity);
+  positive("normal_tolerance", c.normal_tolerance);
+  positive("inlier_distance", c.inlier_distance);
+  atLeast("refine_candidates", c.refine_candidates, 1);
+  positive("icp_spacing", c.icp_spacing);
+  c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
+  positive("icp_max_points", c.icp_max_points);
+  positive("icp_screen_points", c.icp_screen_points);
+  positive("max_cluster_points", c.max_cluster_points);
+  atLeast("icp_exact_iterations", c.icp_exact_iterations, 0);
+  c.icp_mesh_polish = m.getBool("icp_mesh_polish", c.icp_mesh_polish);
+  c.icp_centre_slack = m.getBool("icp_centre_slack", c.icp_centre_slack);
+  positive("icp_slack_range", c.icp_slack_range);
+  positive("icp_slack_tolerance", c.icp_slack_tolerance);
+  share("icp_slack_eigen_ratio", c.icp_slack_eigen_ratio);
+  atLeast("icp_slack_steps", c.icp_slack_steps, 1);
+  c.closest_point_grid = m.getBool("closest_point_grid", c.closest_point_grid);
+  c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
+  if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");
+  positive("fitness_radius", c.fitness_radius);
+  share("min_fitness", c.min_fitness);
+  share("min_coverage", c.min_coverage);
+  positive("max_rmse", c.max_rmse);
+  c.check_visibility = m.getBool("check_visibility", c.check_visibility);
+  if (m.has("viewpoint")) c.viewpoint = m.getVector3("viewpoint").cast<float>();
+  positive("max_view_angle", c.max_view_angle);
+  positive("max_support_penetration", c.max_support_penetration);
+  c.max_instances = m.getInt("max_instances", c.max_instances);
+  if (const auto bad = checkAcceptance(acceptanceOf(c)); !bad.first.empty()) m.fail(bad.first, bad.second);
+  c.min_instance_points = m.getInt("min_instance_points", c.min_instance_points);
+  c.threads = m.getInt("threads", c.threads);
+  c.seed = static_cast<uint64_t>(m.getInt("seed", static_cast<int>(c.seed)));
+  m.finish();
+  return c;
+}
+
+}  // namespace cellsight

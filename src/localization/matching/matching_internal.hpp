@@ -1,0 +1,245 @@
+// Private to src/localization/matching/: the data shared by the matching stages (per-model
+// index with its distance field, prepared scene, coarse hypotheses, ICP rows) and the stage
+// functions' declarations. PCL types stay here and in the stage files, out of the public header.
+#pragma once
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_types.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "cellsight/common/closest_point_grid.hpp"
+#include "cellsight/common/mesh.hpp"
+#include "cellsight/common/point_grid.hpp"
+#include "cellsight/common/raycaster.hpp"
+#include "cellsight/common/scan_cloud.hpp"
+#include "cellsight/localization/model_library.hpp"
+#include "cellsight/localization/model_matching.hpp"
+
+namespace cellsight {
+namespace matching_detail {
+
+using Clock = std::chrono::steady_clock;
+using Vec3 = Eigen::Vector3f;
+
+inline double seconds(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
+
+template <typename Fn>
+void parallelFor(size_t n, int threads, Fn fn) {
+  const int t = std::max(1, std::min<int>(threads, static_cast<int>(n)));
+  if (t <= 1) {
+    for (size_t i = 0; i < n; ++i) fn(i);
+    return;
+  }
+  std::atomic<size_t> next{0};
+  std::vector<std::thread> pool;
+  for (int k = 0; k < t; ++k) {
+    pool.emplace_back([&] {
+      for (size_t i = next++; i < n; i = next++) fn(i);
+    });
+  }
+  for (auto& th : pool) th.join();
+}
+
+/// Regular grid over the model's neighbourhood: per cell, the index of the fine model point
+/// nearest to the cell centre (−1 outside the margin).
+struct DistanceField {
+  Vec3 origin = Vec3::Zero();
+  float cell = 0.001f;
+  Eigen::Vector3i dims = Eigen::Vector3i::Zero();
+  std::vector<int32_t> nearest;
+  int lookup(const Vec3& q) const {
+    const Eigen::Vector3f g = (q - origin) / cell;
+    if (!(g.x() >= 0 && g.y() >= 0 && g.z() >= 0 && g.x() < dims.x() && g.y() < dims.y() && g.z() < dims.z())) return -1;
+    const int x = static_cast<int>(g.x()), y = static_cast<int>(g.y()), z = static_cast<int>(g.z());
+    return nearest[(static_cast<size_t>(z) * dims.y() + y) * dims.x() + x];
+  }
+};
+
+/// Angle bin of a cosine (acos quantised through a table: the same function builds the model
+/// table and keys the scene, so the bins only need to be consistent, and 8192 steps of the
+/// cosine keep them within a fraction of a bin of acos).
+class AngleBins {
+ public:
+  AngleBins() = default;
+  explicit AngleBins(int bins) : bins_(bins), lut_(kSize + 1) {
+    for (int i = 0; i <= kSize; ++i) {
+      const float c = -1.f + 2.f * static_cast<float>(i) / kSize;
+      lut_[i] = static_cast<uint8_t>(std::min(bins - 1, static_cast<int>(std::acos(c) * bins / static_cast<float>(M_PI))));
+    }
+  }
+  int operator()(float c) const {
+    const int i = static_cast<int>((std::clamp(c, -1.f, 1.f) + 1.f) * (0.5f * kSize) + 0.5f);
+    return lut_[i];
+  }
+  int bins() const { return bins_; }
+
+ private:
+  static constexpr int kSize = 8192;
+  int bins_ = 0;
+  std::vector<uint8_t> lut_;
+};
+
+/// Point pair feature hash table of a model: key → (reference point, angle α_m of the pair
+/// about the reference normal).
+struct PpfTable {
+  float dist_step = 0.003f;
+  int angle_bins = 30;
+  AngleBins angles;  // bins of angle_bins, shared by the model table and the scene's keys
+  struct Entry {
+    int32_t cell;   // first accumulator cell of the reference point: ref × angle_bins
+    float alpha;    // α_m in bins: (α_m + π) · angle_bins / 2π, in [0, angle_bins)
+  };
+  std::vector<Entry> entries;    // sorted by key
+  std::vector<uint32_t> offset;  // entries of key k: [offset[k], offset[k + 1]) (dense: O(1) lookup)
+  std::vector<uint64_t> keys;    // instead of `offset` when the key range is too large for it:
+                                 // each entry's key, searched (two binary searches)
+  static constexpr uint64_t kMaxDenseKeys = 1ull << 24;  // 64 MB of offsets
+  std::pair<size_t, size_t> range(uint64_t key) const {
+    if (!keys.empty()) {
+      auto lo = std::lower_bound(keys.begin(), keys.end(), key);
+      auto hi = std::upper_bound(lo, keys.end(), key);
+      return {static_cast<size_t>(lo - keys.begin()), static_cast<size_t>(hi - keys.begin())};
+    }
+    if (key + 1 >= offset.size()) return {0, 0};
+    return {offset[key], offset[key + 1]};
+  }
+};
+
+}  // namespace matching_detail
+
+struct ModelMatcher::ModelIndex {
+  std::string id;
+  ModelInfo info;
+  std::shared_ptr<const ScanCloud> coarse;  // at config.voxel, PCA normals (as a scan sees them)
+  std::vector<Fpfh> fpfh;                   // of coarse (invalid ones zeroed)
+  pcl::KdTreeFLANN<pcl::FPFHSignature33> fpfh_tree;
+  std::vector<int> fpfh_valid;              // coarse indices with a valid descriptor
+  std::shared_ptr<const ScanCloud> fine;    // at config.icp_spacing
+  pcl::KdTreeFLANN<pcl::PointXYZ> fine_tree;
+  matching_detail::DistanceField field;
+  ScanCloud ppf_cloud;  // coarse cloud thinned to ppf_sampling
+  matching_detail::PpfTable ppf;  // its point pair features (Drost et al. 2010)
+  RayCaster caster;  // the mesh in the model frame (self-occlusion)
+  ClosestPointGrid closest;  // candidate triangles per cell for the polish (empty: Embree only)
+  PlanarFaces faces;         // flat faces and their creases (slack centring)
+  bool has_mesh = true;  // false for a cloud model: visibility from the normals only
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  float diameter = 0;
+  std::vector<Eigen::Vector3f> extremes;  // mesh vertices (cloud models: coarse points), for the support test
+};
+
+namespace matching_detail {
+
+/// One cluster prepared once for every model: coarse points with normals and FPFH, the points
+/// ICP uses, and a k-d tree over all its points for the fitness test.
+struct SceneData {
+  std::vector<Vec3> all;       // finite input points
+  ScanCloud coarse;            // voxelised, normals toward the viewpoint
+  std::vector<Fpfh> fpfh;
+  std::vector<int> fpfh_valid;
+  pcl::KdTreeFLANN<pcl::FPFHSignature33> fpfh_tree;
+  ScanCloud ppf;               // coarse thinned to ppf_sampling
+  std::vector<Vec3> icp_points;
+  PointGrid grid;                        // over `all` (scene_search: grid)
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree;  // over `all` (scene_search: kdtree)
+  float diameter = 0;  // lower bound of the largest point distance
+};
+
+struct Correspondence {
+  int scene, model;
+};
+
+struct Hypothesis {
+  Eigen::Isometry3f T = Eigen::Isometry3f::Identity();  // model → scene
+  int score = 0;
+};
+
+/// One scene point in the ICP's exact polish (model frame).
+struct PolishRow {
+  Eigen::Vector3d q, n;  // the point; the face normal, or (outside) the direction from its closest point
+  double r;              // signed distance along n
+  int tri = -1;          // its closest mesh triangle (-1: not from the mesh)
+  bool outside = false;  // beyond an edge or corner: closest to it
+};
+
+struct Refined {
+  Eigen::Isometry3f T = Eigen::Isometry3f::Identity();
+  double rmse = 0;
+  std::vector<PolishRow> polished;  // the exact polish's last rows, at T (mesh models)
+  bool polished_fresh = false;      // their distances hold at T (the last step was below 1 µm)
+};
+
+// ---- scene_preparation.cpp
+pcl::PointCloud<pcl::PointXYZ>::Ptr toXyz(const std::vector<Vec3>& pts);
+pcl::PointCloud<pcl::FPFHSignature33>::Ptr toPclFpfh(const std::vector<Fpfh>& f);
+bool validFpfh(const Fpfh& f);
+/// Thins a cloud with normals to one point per cell (the first one met).
+ScanCloud thinned(const ScanCloud& c, double cell);
+std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const MatchingConfig& cfg);
+/// At most `cap` points: a voxel grid of `leaf` (cell centroids), then every k-th point.
+std::vector<Vec3> capPoints(const std::vector<Vec3>& pts, double leaf, size_t cap);
+
+// ---- hypothesis_scoring.cpp
+/// Counts scene points explained by the model under T (model → scene), with early exit when
+/// the first `probe` points already promise less than `floor`.
+int scoreHypothesis(const SceneData& s, const std::vector<int>& order, const ModelMatcher::ModelIndex& m,
+                    const Eigen::Isometry3f& T, float inlier2, float cos_normal, int probe, double floor_share);
+/// Whether two poses differ by more than dt (m) or 0.2 rad.
+bool distinct(const Eigen::Isometry3f& a, const Eigen::Isometry3f& b, float dt);
+
+// ---- ppf.cpp
+/// The point pair feature table of a model cloud with normals (features shared by more than
+/// max_bucket pairs left out).
+PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins, size_t max_bucket);
+/// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
+std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                                      const Eigen::Vector4f* support, int* iterations);
+
+// ---- fpfh_ransac.cpp
+/// FPFH matches scene → model (mutual when at least min_correspondences survive the filter).
+std::vector<Correspondence> correspondences(const SceneData& s, const ModelMatcher::ModelIndex& m,
+                                            const MatchingConfig& cfg);
+/// RANSAC over 3-point hypotheses: the best refine_candidates distinct poses.
+std::vector<Hypothesis> ransac(const SceneData& s, const ModelMatcher::ModelIndex& m,
+                               const std::vector<Correspondence>& corr, const MatchingConfig& cfg, uint64_t seed,
+                               int* iterations);
+
+// ---- icp.cpp
+/// The mesh's closest point to q (model frame) within max_d: the candidate grid, else Embree.
+ClosestPoint meshClosest(const ModelMatcher::ModelIndex& m, const Eigen::Vector3f& q, float max_d);
+/// Robust point-to-plane ICP of the scene points onto the model (Huber weights, shrinking
+/// correspondence distance); distance-field correspondences, then exact ones.
+/// `max_points`: the scene points used (evenly thinned); `polish`: finish with exact neighbours.
+Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T0,
+            const MatchingConfig& cfg, size_t max_points, bool polish);
+
+// ---- slack_centring.cpp
+/// Centres a polished pose in the slack its scanned faces leave (see slack_centring.cpp).
+/// Rotates the rows with the pose; returns the change (model frame, applied after X).
+Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<PolishRow>& rows, bool fresh,
+                                const MatchingConfig& cfg);
+
+// ---- validation.cpp
+/// Share of the coarse scene points within r of the model under T.
+double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, double r);
+/// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
+/// itself) that have a scene point within r_F.
+double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
+                      const MatchingConfig& cfg);
+/// How far the model under T reaches below the support plane (m; <= 0: not at all).
+float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane);
+/// The detection passes min_fitness, min_coverage and max_rmse.
+bool accepted(const PartDetection& d, const MatchingConfig& cfg);
+
+}  // namespace matching_detail
+}  // namespace cellsight

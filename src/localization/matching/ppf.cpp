@@ -1,0 +1,193 @@
+// Coarse stage "ppf": the model's point pair feature table (Drost et al. 2010), voting over
+// the scene's point pairs, and the best-voted poses scored on the distance field.
+#include <numeric>
+#include <random>
+
+#include "matching_internal.hpp"
+
+namespace cellsight::matching_detail {
+namespace {
+
+/// atan2 to within 2e-6 rad of std::atan2 (measured over 300 000 angles; a minimax polynomial on
+/// [0, 1] and octant folding): PPF angles are binned in 12° steps, so libm's exactness only
+/// costs time in the voting loop.
+float fastAtan2(float y, float x) {
+  const float ax = std::abs(x), ay = std::abs(y);
+  const float mx = std::max(ax, ay), mn = std::min(ax, ay);
+  if (mx == 0.f) return 0.f;
+  const float a = mn / mx, s = a * a;
+  float r = a * (0.99997726f + s * (-0.33262347f + s * (0.19354346f + s * (-0.11643287f + s * (0.05265332f + s * -0.0117212f)))));
+  if (ay > ax) r = static_cast<float>(M_PI_2) - r;
+  if (x < 0.f) r = static_cast<float>(M_PI) - r;
+  return y < 0.f ? -r : r;
+}
+
+/// Transform taking p to the origin and n onto +x.
+Eigen::Isometry3f toLocalFrame(const Vec3& p, const Vec3& n) {
+  Eigen::Isometry3f T = Eigen::Isometry3f::Identity();
+  T.linear() = Eigen::Quaternionf::FromTwoVectors(n, Vec3::UnitX()).toRotationMatrix();
+  T.translation() = -(T.linear() * p);
+  return T;
+}
+
+float pairAlpha(const Eigen::Isometry3f& local, const Vec3& p2) {
+  const Vec3 q = local * p2;
+  return fastAtan2(-q.z(), q.y());
+}
+
+bool ppfKey(const Vec3& p1, const Vec3& n1, const Vec3& p2, const Vec3& n2, float dist_step, const AngleBins& q,
+            uint64_t* key) {
+  const Vec3 d = p2 - p1;
+  const float len = d.norm();
+  if (len < 1e-6f) return false;
+  const Vec3 du = d / len;
+  const uint64_t bins = static_cast<uint64_t>(q.bins());
+  const uint64_t f1 = static_cast<uint64_t>(len / dist_step);
+  *key = (((f1 * bins + q(n1.dot(du))) * bins + q(n2.dot(du))) * bins) + q(n1.dot(n2));
+  return true;
+}
+
+/// Drost-style voting: every `ref_step`-th scene point pairs with all scene points within the
+/// model's diameter; each pair's feature looks up model pairs; votes go to (model reference,
+/// rotation about the normal). One pose per scene reference, with its votes.
+std::vector<Hypothesis> ppfVoting(const ScanCloud& scene, const ModelMatcher::ModelIndex& m, int ref_step) {
+  const PpfTable& t = m.ppf;
+  const int bins = t.angle_bins;
+  const size_t M = m.ppf_cloud.size();
+  std::vector<Hypothesis> out;
+  if (M == 0 || scene.size() < 2) return out;
+  std::vector<int> acc(M * bins);
+  std::vector<uint32_t> touched;  // cells voted for by the current reference (reset after it)
+  const float max_d2 = m.diameter * m.diameter;
+  const float to_bin = bins / static_cast<float>(2 * M_PI);
+  for (size_t r = 0; r < scene.size(); r += static_cast<size_t>(std::max(1, ref_step))) {
+    for (uint32_t k : touched) acc[k] = 0;
+    touched.clear();
+    const Vec3 &pr = scene.points[r], &nr = scene.normals[r];
+    const Eigen::Isometry3f Ls = toLocalFrame(pr, nr);
+    // the running maximum (lowest cell on ties, as a scan would find it) instead of a scan
+    // of the M × bins accumulator per reference
+    int best = 0;
+    size_t best_k = 0;
+    for (size_t i = 0; i < scene.size(); ++i) {
+      if (i == r || (scene.points[i] - pr).squaredNorm() > max_d2) continue;
+      uint64_t key;
+      if (!ppfKey(pr, nr, scene.points[i], scene.normals[i], t.dist_step, t.angles, &key)) continue;
+      const auto [lo, hi] = t.range(key);
+      if (lo == hi) continue;
+      // rotation bin of α_m − α_s, wrapped into [0, bins): entries carry α_m in bins already
+      const float as = pairAlpha(Ls, scene.points[i]) * to_bin - static_cast<float>(bins);
+      for (size_t e = lo; e < hi; ++e) {
+        int b = static_cast<int>(t.entries[e].alpha - as);  // in [bins/2, 5 bins/2)
+        if (b >= bins) b -= bins;
+        if (b >= bins) b -= bins;
+        const size_t k = static_cast<size_t>(t.entries[e].cell) + static_cast<size_t>(b);
+        const int v = ++acc[k];
+        if (v == 1) touched.push_back(static_cast<uint32_t>(k));
+        if (v > best || (v == best && k < best_k)) {
+          best = v;
+          best_k = k;
+        }
+      }
+    }
+    if (best < 3) continue;
+    const size_t k = best_k;
+    const int mr = static_cast<int>(k / bins);
+    const float alpha = (static_cast<float>(k % bins) + 0.5f) / to_bin - static_cast<float>(M_PI);
+    const Eigen::Isometry3f Lm = toLocalFrame(m.ppf_cloud.points[mr], m.ppf_cloud.normals[mr]);
+    Hypothesis h;
+    h.T = Ls.inverse() * Eigen::AngleAxisf(alpha, Vec3::UnitX()) * Lm;
+    h.score = best;
+    out.push_back(h);
+  }
+
+  return out;
+}
+
+}  // namespace
+
+PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins, size_t max_bucket) {
+  PpfTable t;
+  t.dist_step = dist_step;
+  t.angle_bins = bins;
+  t.angles = AngleBins(bins);
+  std::vector<std::pair<uint64_t, PpfTable::Entry>> all;
+  all.reserve(c.size() * (c.size() - 1));
+  for (size_t i = 0; i < c.size(); ++i) {
+    const Eigen::Isometry3f L = toLocalFrame(c.points[i], c.normals[i]);
+    for (size_t j = 0; j < c.size(); ++j) {
+      uint64_t key;
+      if (i == j || !ppfKey(c.points[i], c.normals[i], c.points[j], c.normals[j], dist_step, t.angles, &key)) continue;
+      const float alpha_bins = (pairAlpha(L, c.points[j]) + static_cast<float>(M_PI)) * bins / static_cast<float>(2 * M_PI);
+      all.push_back({key, {static_cast<int32_t>(i) * bins, std::min(alpha_bins, std::nextafter(static_cast<float>(bins), 0.f))}});
+    }
+  }
+  // by key, then by accumulator cell: a key's votes then walk the accumulator forwards
+  std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) {
+    return a.first < b.first || (a.first == b.first && a.second.cell < b.second.cell);
+  });
+  // Features shared by very many pairs (two points on one large flat face differ only in their
+  // distance) say little about the pose and cost most of the voting: leave them out.
+  t.entries.reserve(all.size());
+  const bool dense = all.empty() || all.back().first + 2 <= PpfTable::kMaxDenseKeys;
+  if (dense) t.offset.assign(all.empty() ? 1 : all.back().first + 2, 0);
+  for (size_t a = 0; a < all.size();) {
+    size_t b = a;
+    while (b < all.size() && all[b].first == all[a].first) ++b;
+    if (b - a <= max_bucket) {
+      for (size_t k = a; k < b; ++k) {
+        t.entries.push_back(all[k].second);
+        if (!dense) t.keys.push_back(all[k].first);
+      }
+    }
+    if (dense) t.offset[all[a].first + 1] = static_cast<uint32_t>(t.entries.size());  // end of this key
+    a = b;
+  }
+  // keys without entries end where the previous key ended
+  for (size_t k = 1; k < t.offset.size(); ++k) t.offset[k] = std::max(t.offset[k], t.offset[k - 1]);
+  return t;
+}
+
+/// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
+std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                                      const Eigen::Vector4f* support, int* iterations) {
+  std::vector<Hypothesis> votes = ppfVoting(s.ppf, m, cfg.ppf_ref_step);
+  *iterations = static_cast<int>(votes.size());
+  std::sort(votes.begin(), votes.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
+  if (votes.size() > static_cast<size_t>(cfg.ppf_candidates)) votes.resize(cfg.ppf_candidates);
+  // scene points in a random (fixed) order: a pose whose first `probe` points explain less
+  // than half the best pose's share so far stops there (its score extrapolated)
+  std::vector<int> order(s.coarse.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::mt19937_64 rng(cfg.seed);
+  std::shuffle(order.begin(), order.end(), rng);
+  // the ranking needs the share of points explained, not every point: a quarter of them, at
+  // least 300 (±3 % of the share; the screening ICP then ranks the few kept on all points)
+  order.resize(std::min(order.size(), std::max<size_t>(300, order.size() / 4)));
+  const int probe = std::min<int>(64, static_cast<int>(order.size()));
+  int best_score = 0;
+  const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
+  std::vector<Hypothesis> top;
+  const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
+  // a coarse pose may be a few millimetres off: only clearly sunken ones are dropped here
+  const float sunk = static_cast<float>(cfg.max_support_penetration + 2 * cfg.inlier_distance);
+  for (auto& v : votes) {
+    if (support && belowSupport(m, v.T, *support) > sunk) continue;
+    v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), probe, 0.5 * best_score / static_cast<double>(order.size()));
+    best_score = std::max(best_score, v.score);
+    bool merged = false;
+    for (auto& h : top) {
+      if (!distinct(h.T, v.T, static_cast<float>(2 * cfg.inlier_distance))) {
+        if (v.score > h.score) h = v;
+        merged = true;
+        break;
+      }
+    }
+    if (!merged) top.push_back(v);
+  }
+  std::sort(top.begin(), top.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
+  if (top.size() > keep) top.resize(keep);
+  return top;
+}
+
+}  // namespace cellsight::matching_detail

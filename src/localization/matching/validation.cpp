@@ -1,0 +1,145 @@
+// Validation of a refined pose (coverage, visible fitness, support, acceptance) and the
+// symmetry-aware pose error and canonical pose.
+#include <limits>
+
+#include "matching_internal.hpp"
+
+namespace cellsight {
+namespace matching_detail {
+
+/// Share of the coarse scene points within r of the model under T.
+double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, double r) {
+  if (s.coarse.size() == 0) return 0;
+  const Eigen::Isometry3f Ti = T.inverse();
+  const float r2 = static_cast<float>(r * r);
+  size_t n = 0;
+  for (const auto& p : s.coarse.points) {
+    const Vec3 q = Ti * p;
+    const int j = m.field.lookup(q);
+    if (j >= 0 && (q - m.fine->points[j]).squaredNorm() <= r2) ++n;
+  }
+  return static_cast<double>(n) / s.coarse.size();
+}
+
+/// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
+/// itself) that have a scene point within r_F.
+double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
+                      const MatchingConfig& cfg) {
+  const Eigen::Isometry3f Ti = T.inverse();
+  const Vec3 eye = Ti * cfg.viewpoint;
+  const float cos_max = std::cos(static_cast<float>(cfg.max_view_angle));
+  const float r2 = static_cast<float>(cfg.fitness_radius * cfg.fitness_radius);
+  std::vector<int> idx(1);
+  std::vector<float> d2(1);
+  size_t visible = 0, matched = 0;
+  const auto& mp = m.coarse->points;
+  const auto& mn = m.coarse->normals;
+  for (size_t i = 0; i < mp.size(); ++i) {
+    if (cfg.check_visibility) {
+      const Vec3 ray = mp[i] - eye;
+      const float dist = ray.norm();
+      if (dist <= 0) continue;
+      const Vec3 dir = ray / dist;
+      if (-mn[i].dot(dir) < cos_max) continue;
+      if (m.has_mesh && m.caster.occluded(eye, dir, 0.f, dist - static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel)))) continue;
+    }
+    ++visible;
+    const Vec3 p = T * mp[i];
+    if (cfg.scene_search == "grid") {
+      matched += s.grid.anyWithin(p, static_cast<float>(cfg.fitness_radius));
+    } else if (s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2) {
+      ++matched;
+    }
+  }
+  return visible ? static_cast<double>(matched) / visible : 0.0;
+}
+
+/// How far the model under T reaches below the support plane (m; <= 0: not at all).
+float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane) {
+  float lowest = std::numeric_limits<float>::infinity();
+  for (const auto& v : m.extremes) lowest = std::min(lowest, plane.head<3>().dot(T * v) + plane.w());
+  return m.extremes.empty() ? 0.f : -lowest;
+}
+
+bool accepted(const PartDetection& d, const MatchingConfig& cfg) {
+  return d.score > 0 && d.fitness >= cfg.min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse;
+}
+
+}  // namespace matching_detail
+
+namespace {
+
+Eigen::Matrix3d rotationAbout(const Eigen::Vector3d& axis, double angle) {
+  return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+}
+
+double rotationAngle(const Eigen::Matrix3d& R) { return Eigen::AngleAxisd(R).angle(); }
+
+}  // namespace
+
+PoseError poseError(const ModelInfo& info, const Eigen::Vector3d& centroid, const Eigen::Isometry3d& est,
+                    const Eigen::Isometry3d& truth) {
+  PoseError e;
+  e.translation = (est * centroid - truth * centroid).norm();
+  const Eigen::Vector3d a = info.symmetry.axis.normalized();
+  switch (info.symmetry.type) {
+    case Symmetry::Type::kNone:
+      e.rotation = rotationAngle(est.linear().transpose() * truth.linear());
+      break;
+    case Symmetry::Type::kDiscrete: {
+      e.rotation = M_PI;
+      for (int k = 0; k < info.symmetry.order; ++k) {
+        const Eigen::Matrix3d Rk = est.linear() * rotationAbout(a, 2 * M_PI * k / info.symmetry.order);
+        e.rotation = std::min(e.rotation, rotationAngle(Rk.transpose() * truth.linear()));
+      }
+      break;
+    }
+    case Symmetry::Type::kAxial:
+      e.rotation = std::acos(std::clamp((est.linear() * a).dot(truth.linear() * a), -1.0, 1.0));
+      break;
+    case Symmetry::Type::kSpherical:
+      e.rotation = 0;
+      break;
+  }
+  return e;
+}
+
+Eigen::Isometry3d canonicalPose(const ModelInfo& info, const Eigen::Vector3d& centroid, const Eigen::Isometry3d& pose) {
+  Eigen::Isometry3d out = pose;
+  const Eigen::Vector3d a = info.symmetry.axis.normalized();
+  // how far the model's x axis, turned about the axis, is from the scene's +x
+  auto xCost = [&](const Eigen::Matrix3d& R) { return -(R * Eigen::Vector3d::UnitX()).x(); };
+  switch (info.symmetry.type) {
+    case Symmetry::Type::kNone:
+      break;
+    case Symmetry::Type::kDiscrete: {
+      double best = 1e9;
+      for (int k = 0; k < info.symmetry.order; ++k) {
+        const Eigen::Matrix3d R = pose.linear() * rotationAbout(a, 2 * M_PI * k / info.symmetry.order);
+        if (xCost(R) < best - 1e-9) {
+          best = xCost(R);
+          out.linear() = R;
+        }
+      }
+      break;
+    }
+    case Symmetry::Type::kAxial: {
+      // maximise (R Rot(a,θ) x)·X = cosθ·u + sinθ·v with u = (R x)·X, v = (R (a × x))·X
+      Eigen::Vector3d x = Eigen::Vector3d::UnitX();
+      if (std::abs(a.dot(x)) > 0.9) x = Eigen::Vector3d::UnitY();
+      x = (x - a * a.dot(x)).normalized();
+      const Eigen::Vector3d y = a.cross(x);
+      const double u = (pose.linear() * x).x(), v = (pose.linear() * y).x();
+      const double theta = std::atan2(v, u);
+      out.linear() = pose.linear() * rotationAbout(a, theta);
+      break;
+    }
+    case Symmetry::Type::kSpherical:
+      out.linear().setIdentity();
+      out.translation() = pose * centroid - centroid;
+      break;
+  }
+  return out;
+}
+
+}  // namespace cellsight

@@ -1,0 +1,308 @@
+#include "cellsight/scanner/calibrate.hpp"
+
+#include <Eigen/Dense>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/scanner/triangulation.hpp"
+#include "cellsight/common/yaml_reader.hpp"
+
+#include <filesystem>
+
+#include <algorithm>
+
+namespace cellsight {
+
+std::vector<LaserObservation> loadLaserObservations(const std::string& path) {
+  YamlMap root(loadYamlFile(path), path);
+  std::vector<LaserObservation> obs;
+  for (const YamlMap& m : root.getMapList("observations")) {
+    LaserObservation o;
+    const std::string img = resolveRelative(path, m.getString("image"));
+    o.image = cv::imread(img, cv::IMREAD_GRAYSCALE);
+    if (o.image.empty()) m.fail("image", "cannot read " + img);
+    o.T_base_flange = m.getPose("flange_pose");
+    o.plane_z = m.getDouble("plane_z", 0.0);
+    o.block_z = m.getDouble("block_z", 0.0);
+    m.finish();
+    obs.push_back(o);
+  }
+  root.finish();
+  if (obs.empty()) throw ConfigError(path + ": observations: the list is empty");
+  return obs;
+}
+
+std::vector<std::string> listImages(const std::vector<std::string>& args) {
+  namespace fs = std::filesystem;
+  std::vector<std::string> out;
+  for (const auto& p : args) {
+    std::error_code ec;
+    if (fs::is_directory(p, ec)) {
+      std::vector<std::string> files;
+      for (const auto& e : fs::directory_iterator(p, ec)) {
+        std::string lower = e.path().filename().string();
+        std::transform(lower.begin(), lower.end(), lower.begin(), ::tolower);
+        const auto ends = [&](const std::string& x) {
+          return lower.size() > x.size() && lower.compare(lower.size() - x.size(), x.size(), x) == 0;
+        };
+        if (ends(".png") || ends(".jpg") || ends(".jpeg")) files.push_back(p + "/" + e.path().filename().string());
+      }
+      std::sort(files.begin(), files.end());
+      out.insert(out.end(), files.begin(), files.end());
+    } else {
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+
+DistortionModel parseDistortionModel(const std::string& name) {
+  if (name == "k1") return DistortionModel::kK1;
+  if (name == "full") return DistortionModel::kFull;
+  throw std::invalid_argument("unknown distortion model '" + name + "' (use k1 or full)");
+}
+
+bool findChessboard(const cv::Mat& grey, const ChessboardSpec& board, std::vector<cv::Point2f>& corners) {
+  corners.clear();
+  if (!cv::findChessboardCorners(grey, board.inner_corners, corners,
+                                 cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE)) {
+    return false;
+  }
+  cv::cornerSubPix(grey, corners, cv::Size(11, 11), cv::Size(-1, -1),
+                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-4));
+  return true;
+}
+
+namespace {
+std::vector<cv::Point3f> boardPoints(const ChessboardSpec& b) {
+  std::vector<cv::Point3f> pts;
+  for (int r = 0; r < b.inner_corners.height; ++r) {
+    for (int c = 0; c < b.inner_corners.width; ++c) {
+      pts.emplace_back(static_cast<float>(c * b.square_size), static_cast<float>(r * b.square_size), 0.f);
+    }
+  }
+  return pts;
+}
+}  // namespace
+
+IntrinsicsResult calibrateIntrinsics(const std::vector<std::string>& files, const ChessboardSpec& board,
+                                     DistortionModel model, bool fix_aspect_ratio) {
+  std::vector<std::pair<std::string, cv::Mat>> views;
+  views.reserve(files.size());
+  for (const auto& f : files) views.emplace_back(f, cv::imread(f, cv::IMREAD_GRAYSCALE));
+  return calibrateIntrinsics(views, board, model, fix_aspect_ratio);
+}
+
+IntrinsicsResult calibrateIntrinsics(const std::vector<std::pair<std::string, cv::Mat>>& views,
+                                     const ChessboardSpec& board, DistortionModel model, bool fix_aspect_ratio) {
+  IntrinsicsResult res;
+  std::vector<std::vector<cv::Point2f>> image_points;
+  std::vector<std::vector<cv::Point3f>> object_points;
+  cv::Size size;
+  for (const auto& [f, grey] : views) {
+    if (grey.empty()) {
+      res.rejected.push_back(f + " (unreadable)");
+      continue;
+    }
+    if (size.area() == 0) size = grey.size();
+    if (grey.size() != size) {
+      res.rejected.push_back(f + " (other image size)");
+      continue;
+    }
+    std::vector<cv::Point2f> corners;
+    if (!findChessboard(grey, board, corners)) {
+      res.rejected.push_back(f + " (no board)");
+      continue;
+    }
+    image_points.push_back(corners);
+    object_points.push_back(boardPoints(board));
+    res.used.push_back(f);
+  }
+  if (image_points.size() < 3) {
+    throw std::runtime_error("intrinsic calibration needs at least 3 views of the board, found " +
+                             std::to_string(image_points.size()) + " of " + std::to_string(views.size()));
+  }
+  int flags = 0;
+  if (model == DistortionModel::kK1) flags |= cv::CALIB_FIX_K2 | cv::CALIB_FIX_K3 | cv::CALIB_ZERO_TANGENT_DIST;
+  if (fix_aspect_ratio) flags |= cv::CALIB_FIX_ASPECT_RATIO;
+  cv::Mat K = cv::Mat::eye(3, 3, CV_64F), D = cv::Mat::zeros(5, 1, CV_64F);
+  std::vector<cv::Mat> rvecs, tvecs;
+  cv::Mat std_in, std_ex, per_view;
+  res.rms_px = cv::calibrateCamera(object_points, image_points, size, K, D, rvecs, tvecs, std_in, std_ex,
+                                   per_view, flags);
+  for (int i = 0; i < per_view.rows; ++i) res.per_view_rms_px.push_back(per_view.at<double>(i));
+  res.camera.width = size.width;
+  res.camera.height = size.height;
+  res.camera.fx = K.at<double>(0, 0);
+  res.camera.fy = K.at<double>(1, 1);
+  res.camera.cx = K.at<double>(0, 2);
+  res.camera.cy = K.at<double>(1, 2);
+  for (int i = 0; i < 5; ++i) res.camera.dist[static_cast<size_t>(i)] = D.at<double>(i);
+  return res;
+}
+
+Eigen::Isometry3d frameFromThreePoints(const Eigen::Vector3d& o, const Eigen::Vector3d& on_x,
+                                       const Eigen::Vector3d& in_xy) {
+  const Eigen::Vector3d x = on_x - o;
+  const Eigen::Vector3d z = x.cross(in_xy - o);
+  if (x.norm() < 1e-6 || z.norm() < 1e-9) {
+    throw std::invalid_argument("taught points are too close or collinear to define a frame");
+  }
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear().col(0) = x.normalized();
+  T.linear().col(2) = z.normalized();
+  T.linear().col(1) = T.linear().col(2).cross(T.linear().col(0));
+  T.translation() = o;
+  return T;
+}
+
+ExtrinsicsResult calibrateExtrinsics(const cv::Mat& grey, const ChessboardSpec& board, const CameraIntrinsics& cam,
+                                     const Eigen::Isometry3d& T_base_pattern) {
+  std::vector<cv::Point2f> corners;
+  if (!findChessboard(grey, board, corners)) throw std::runtime_error("the calibration pattern was not found in the image");
+  const cv::Matx33d K(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
+  const std::vector<double> D(cam.dist.begin(), cam.dist.end());
+  const auto obj = boardPoints(board);
+  cv::Mat rvec, tvec;
+  cv::solvePnP(obj, corners, K, D, rvec, tvec, false, cv::SOLVEPNP_ITERATIVE);
+  cv::solvePnPRefineLM(obj, corners, K, D, rvec, tvec);
+  std::vector<cv::Point2f> reproj;
+  cv::projectPoints(obj, rvec, tvec, K, D, reproj);
+  double s2 = 0;
+  for (size_t i = 0; i < reproj.size(); ++i) s2 += std::pow(cv::norm(reproj[i] - corners[i]), 2);
+  cv::Mat R;
+  cv::Rodrigues(rvec, R);
+  ExtrinsicsResult r;
+  Eigen::Matrix3d Re;
+  cv::cv2eigen(R, Re);
+  r.T_camera_pattern.linear() = Re;
+  r.T_camera_pattern.translation() << tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2);
+  r.T_base_camera = T_base_pattern * r.T_camera_pattern.inverse();
+  r.rms_px = std::sqrt(s2 / static_cast<double>(reproj.size()));
+  return r;
+}
+
+Eigen::Isometry3d laserFrameFromPlane(const Plane& p, const Eigen::Vector3d& towards) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  const Eigen::Vector3d origin = -p.d * p.n;  // flange origin projected on the sheet
+  Eigen::Vector3d z = towards - origin;
+  z -= z.dot(p.n) * p.n;
+  if (z.norm() < 1e-9) throw std::runtime_error("laser frame: beam direction lies along the sheet normal");
+  z.normalize();
+  T.linear().col(1) = p.n;
+  T.linear().col(2) = z;
+  T.linear().col(0) = p.n.cross(z);
+  T.translation() = origin;
+  return T;
+}
+
+namespace {
+// Line points of one observation cut with the horizontal plane z = h, in the base frame.
+std::vector<Eigen::Vector3d> linePointsOnPlane(const std::vector<LinePoint>& pts, const CameraIntrinsics& cam,
+                                               const Eigen::Isometry3d& T_base_camera, double h) {
+  std::vector<Eigen::Vector3d> out;
+  const Eigen::Vector3d C = T_base_camera.translation();
+  for (const auto& lp : pts) {
+    const Eigen::Vector3d r = T_base_camera.linear() * cam.pixelRay({lp.u, lp.v});
+    if (std::abs(r.z()) < 1e-9) continue;
+    const double t = (h - C.z()) / r.z();
+    if (t <= 0) continue;
+    out.push_back(C + t * r);
+  }
+  return out;
+}
+
+LaserCalibrationResult fitSheet(const std::vector<Eigen::Vector3d>& pts_flange) {
+  if (pts_flange.size() < 3) throw std::runtime_error("laser calibration: fewer than 3 line points observed");
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : pts_flange) mean += p;
+  mean /= static_cast<double>(pts_flange.size());
+  Eigen::MatrixXd M(pts_flange.size(), 3);
+  for (size_t i = 0; i < pts_flange.size(); ++i) M.row(static_cast<Eigen::Index>(i)) = (pts_flange[i] - mean).transpose();
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(M, Eigen::ComputeThinV);
+  const Eigen::Vector3d sv = svd.singularValues();
+  LaserCalibrationResult r;
+  r.spread_ratio = sv(0) > 0 ? sv(1) / sv(0) : 0;
+  if (r.spread_ratio < 1e-3) {
+    throw std::runtime_error("laser calibration: the observed points lie on one line; observe the sheet on "
+                             "surfaces at different heights or from different robot poses");
+  }
+  r.plane_flange.n = svd.matrixV().col(2).normalized();
+  r.plane_flange.d = -r.plane_flange.n.dot(mean);
+  double s2 = 0;
+  for (const auto& p : pts_flange) s2 += std::pow(r.plane_flange.distance(p), 2);
+  r.rms_m = std::sqrt(s2 / static_cast<double>(pts_flange.size()));
+  r.points = pts_flange.size();
+  r.T_flange_laser = laserFrameFromPlane(r.plane_flange, mean);
+  return r;
+}
+}  // namespace
+
+LaserCalibrationResult calibrateLaserLeastSquares(const std::vector<LaserObservation>& obs,
+                                                  const CameraIntrinsics& cam, const Eigen::Isometry3d& T_base_camera,
+                                                  const LineExtractionConfig& line) {
+  std::vector<Eigen::Vector3d> pts_flange;
+  for (const auto& o : obs) {
+    const auto pts = extractLine(o.image, line);
+    const Eigen::Isometry3d T_flange_base = o.T_base_flange.inverse();
+    for (const auto& p : linePointsOnPlane(pts, cam, T_base_camera, o.plane_z)) pts_flange.push_back(T_flange_base * p);
+  }
+  return fitSheet(pts_flange);
+}
+
+LaserCalibrationResult calibrateLaserThreePoint(const LaserObservation& o, const CameraIntrinsics& cam,
+                                                const Eigen::Isometry3d& T_base_camera,
+                                                const LineExtractionConfig& line) {
+  const auto pts = extractLine(o.image, line);
+  // Split the polyline into straight runs at jumps (the block's edges).
+  std::vector<std::vector<LinePoint>> segs;
+  for (const auto& p : pts) {
+    if (segs.empty() || std::abs(p.v - segs.back().back().v) > 3.0 || p.u - segs.back().back().u > 3.0) segs.emplace_back();
+    segs.back().push_back(p);
+  }
+  std::sort(segs.begin(), segs.end(), [](const auto& a, const auto& b) { return a.size() > b.size(); });
+  if (segs.size() < 2 || segs[1].size() < 10) {
+    throw std::runtime_error("three-point laser calibration: the line must cross both the plate and the gauge block");
+  }
+  // The plate carries the longest straight run. The block top is nearer the emitter, so with the
+  // sheet leaning its line is displaced towards the flange in the image: the block segment is
+  // the run (≥ 10 points) whose middle lies nearest the flange's image.
+  auto mid = [](const std::vector<LinePoint>& s) { return s[s.size() / 2]; };
+  const Eigen::Isometry3d T_cam_base = T_base_camera.inverse();
+  const Eigen::Vector2d flange_px = cam.project(T_cam_base * o.T_base_flange.translation());
+  auto dist_to_flange = [&](const std::vector<LinePoint>& s) {
+    return (Eigen::Vector2d(mid(s).u, mid(s).v) - flange_px).norm();
+  };
+  const auto& plate = segs[0];
+  const std::vector<LinePoint>* block_ptr = nullptr;
+  for (size_t i = 1; i < segs.size(); ++i) {
+    if (segs[i].size() < 10) continue;
+    if (!block_ptr || dist_to_flange(segs[i]) < dist_to_flange(*block_ptr)) block_ptr = &segs[i];
+  }
+  if (!block_ptr || dist_to_flange(*block_ptr) >= dist_to_flange(plate)) {
+    throw std::runtime_error("three-point laser calibration: no line segment on the gauge block was found");
+  }
+  const auto& block = *block_ptr;
+  const std::vector<LinePoint> chosen_plate = {plate[plate.size() / 10], plate[plate.size() * 9 / 10]};
+  const std::vector<LinePoint> chosen_block = {mid(block)};
+  std::vector<Eigen::Vector3d> three = linePointsOnPlane(chosen_plate, cam, T_base_camera, o.plane_z);
+  for (const auto& p : linePointsOnPlane(chosen_block, cam, T_base_camera, o.block_z)) three.push_back(p);
+  if (three.size() != 3) throw std::runtime_error("three-point laser calibration: a chosen ray misses its plane");
+  const Eigen::Isometry3d T_flange_base = o.T_base_flange.inverse();
+  for (auto& p : three) p = T_flange_base * p;
+  const Eigen::Vector3d n = (three[1] - three[0]).cross(three[2] - three[0]);
+  if (n.norm() < 1e-12) throw std::runtime_error("three-point laser calibration: the three points are collinear");
+  LaserCalibrationResult r;
+  r.plane_flange.n = n.normalized();
+  r.plane_flange.d = -r.plane_flange.n.dot(three[0]);
+  r.points = 3;
+  r.spread_ratio = 1.0;
+  r.T_flange_laser = laserFrameFromPlane(r.plane_flange, (three[0] + three[1] + three[2]) / 3);
+  return r;
+}
+
+}  // namespace cellsight

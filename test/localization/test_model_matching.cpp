@@ -1,0 +1,326 @@
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <random>
+
+#include "cellsight/common/errors.hpp"
+#include "cellsight/localization/localization_eval.hpp"
+#include "cellsight/localization/model_matching.hpp"
+#include "test_helpers.hpp"
+
+using namespace cellsight;
+using cellsight_test::errorOf;
+
+namespace {
+
+const std::string kModels = std::string(CELLSIGHT_SOURCE_DIR) + "/config/models";
+const Eigen::Vector3f kEye(0.52f, 0.f, 0.62f);  // the demo's scanner camera
+
+std::shared_ptr<const ModelLibrary> library() {
+  static auto lib = std::make_shared<const ModelLibrary>(kModels);
+  return lib;
+}
+
+MatchingConfig config() {
+  MatchingConfig c;
+  c.viewpoint = kEye;
+  return c;
+}
+
+Eigen::Isometry3d onTable(double x, double y, double yaw) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(x, y, 0);
+  T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  return T;
+}
+
+}  // namespace
+
+TEST(ModelMatching, FindsEachPartInItsSingleViewCloud) {
+  ModelMatcher m(library(), config());
+  int k = 0;
+  for (const std::string id : {"bracket", "housing", "blade", "holder"}) {
+    const Eigen::Isometry3d truth = onTable(0.45 + 0.03 * k, -0.05 + 0.04 * k, 0.4 + 1.3 * k);
+    ++k;
+    const ScanCloud view = singleViewCloud(library()->model(id).mesh, truth, kEye, 0.001, 2e-5, 7 + k);
+    MatchStats st;
+    const auto d = m.locate({view}, {}, &st);
+    ASSERT_EQ(d.size(), 1u) << id;
+    EXPECT_EQ(d[0].model, id);
+    const PoseError e = poseError(library()->model(id).info, m.centroid(id), d[0].pose, truth);
+    std::printf("%-8s %zu points: %.3f mm %.3f deg, fitness %.2f coverage %.2f rmse %.3f mm, %.3f s\n", id.c_str(),
+                view.size(), e.translation * 1e3, e.rotation * 180 / M_PI, d[0].fitness, d[0].coverage, d[0].rmse * 1e3,
+                st.seconds);
+    EXPECT_LT(e.translation, 0.5e-3) << id;
+    EXPECT_LT(e.rotation, 0.5 * M_PI / 180) << id;
+  }
+}
+
+TEST(ModelMatching, SymmetryAwareErrorsAndCanonicalPoses) {
+  ModelInfo info;
+  const Eigen::Vector3d c(0, 0, 0.01);
+  const Eigen::Isometry3d T = onTable(0.5, 0.1, 0.3);
+  const Eigen::Isometry3d half = T * onTable(0, 0, M_PI);
+  info.symmetry.type = Symmetry::Type::kNone;
+  EXPECT_NEAR(poseError(info, c, half, T).rotation, M_PI, 1e-9);
+  info.symmetry.type = Symmetry::Type::kDiscrete;
+  info.symmetry.order = 2;
+  EXPECT_NEAR(poseError(info, c, half, T).rotation, 0, 1e-9);
+  EXPECT_NEAR(poseError(info, c, T * onTable(0, 0, 0.5 * M_PI), T).rotation, 0.5 * M_PI, 1e-9);
+  // canonical poses of equivalent poses coincide
+  EXPECT_TRUE(canonicalPose(info, c, half).isApprox(canonicalPose(info, c, T), 1e-9));
+  info.symmetry.type = Symmetry::Type::kAxial;
+  EXPECT_NEAR(poseError(info, c, T * onTable(0, 0, 1.234), T).rotation, 0, 1e-9);
+  EXPECT_TRUE(canonicalPose(info, c, T * onTable(0, 0, 1.234)).isApprox(canonicalPose(info, c, T), 1e-9));
+  Eigen::Isometry3d tilted = T;
+  tilted.linear() = T.linear() * Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  EXPECT_NEAR(poseError(info, c, tilted, T).rotation, 0.1, 1e-9);
+  info.symmetry.type = Symmetry::Type::kSpherical;
+  EXPECT_EQ(poseError(info, c, tilted, T).rotation, 0);
+  const Eigen::Isometry3d s = canonicalPose(info, c, tilted);
+  EXPECT_TRUE(s.linear().isIdentity(1e-12));
+  EXPECT_TRUE((s * c).isApprox(tilted * c, 1e-12));  // the centre stays
+}
+
+TEST(ModelMatching, OcclusionAndOutliersKeepThePart) {
+  ModelMatcher m(library(), config());
+  const Eigen::Isometry3d truth = onTable(0.5, 0.02, 0.7);
+  const ScanCloud view = singleViewCloud(library()->model("bracket").mesh, truth, kEye, 0.001, 2e-5, 3);
+  std::mt19937_64 rng(5);
+  const ScanCloud occluded = randomWalkOcclusion(view, 0.4, 20, rng);
+  EXPECT_NEAR(static_cast<double>(occluded.size()) / view.size(), 0.6, 0.01);
+  Eigen::AlignedBox3f box;
+  for (const auto& p : view.points) box.extend(p);
+  const ScanCloud noisy = addUniformOutliers(view, box, 1.0, rng);
+  EXPECT_EQ(noisy.size(), 2 * view.size());
+  MatchingConfig whole = config();
+  whole.min_coverage = 0;  // outliers are not part of the cluster to explain
+  ModelMatcher mw(library(), whole);
+  for (const ScanCloud* c : {&occluded, &noisy}) {
+    MatchStats st;
+    const auto d = (c == &noisy ? mw : m).locate({*c}, {"bracket", "housing"}, &st);
+    ASSERT_GE(d.size(), 1u) << (c == &noisy ? "outliers" : "occlusion");
+    EXPECT_EQ(d[0].model, "bracket");
+    const PoseError e = poseError(library()->model("bracket").info, m.centroid("bracket"), d[0].pose, truth);
+    // strict success (2 mm / 2 deg): seen from above, the bracket's in-plane pose rests on its
+    // outline, and uniform outliers near the surface move it within that slack (measured over
+    // 10 seeds at 100 % outliers: 0.05-0.37 mm, 0.01-1.1 deg; session 4)
+    EXPECT_LT(e.translation, 2e-3);
+    EXPECT_LT(e.rotation, 2 * M_PI / 180);
+  }
+}
+
+// A U-profile seen from above says little along its extrusion once the walk has eaten an end:
+// the exact polish (mesh face normals) is then singular in that direction and used to step
+// metres along it (occlusion test, holder at 25 %: 80 % success). Unconstrained directions get
+// no step now (measured, 40 trials: 36 with the plain LDLT solve, 40 now).
+TEST(ModelMatching, UnconstrainedDirectionGetsNoStep) {
+  MatchingConfig c = config();
+  c.min_fitness = 0.1;  // as the occlusion test
+  ModelMatcher m(library(), c);
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> U(0, 1);
+  const Eigen::Vector4f table(0, 0, 1, 0);
+  int ok = 0;
+  const int trials = 40;
+  for (int t = 0; t < trials; ++t) {
+    const Eigen::Isometry3d truth = onTable(0.40 + 0.24 * U(rng), -0.09 + 0.18 * U(rng), 2 * M_PI * U(rng));
+    const ScanCloud view = singleViewCloud(library()->model("holder").mesh, truth, kEye, 0.001, 2e-5, rng());
+    const auto d = m.locate({randomWalkOcclusion(view, 0.25, 20, rng)}, {"holder"}, nullptr, nullptr, &table);
+    if (d.empty()) continue;
+    ASSERT_TRUE(d[0].pose.matrix().allFinite());
+    const PoseError e = poseError(library()->model("holder").info, m.centroid("holder"), d[0].pose, truth);
+    ok += e.translation < 2e-3 && e.rotation < 2 * M_PI / 180;
+  }
+  std::printf("holder, 25 %% occluded: %d of %d within 2 mm / 2 deg\n", ok, trials);
+  EXPECT_GE(ok, trials - 1);
+}
+
+// A blade whose root block the walk removed is a thin tapered plate: seen from above it fits
+// upside down too (measured: most blade failures at 30-45 % occlusion). With the table given,
+// sunken poses are discarded; a plane above the part leaves no physical pose at all.
+TEST(ModelMatching, SupportPlaneDiscardsSunkenPoses) {
+  ModelMatcher m(library(), config());
+  const Eigen::Isometry3d truth = onTable(0.47, 0.03, 2.1);
+  const ScanCloud view = singleViewCloud(library()->model("blade").mesh, truth, kEye, 0.001, 2e-5, 11);
+  const Eigen::Vector4f table(0, 0, 1, 0), above(0, 0, 1, -0.02);
+  const auto on_table = m.locate({view}, {"blade"}, nullptr, nullptr, &table);
+  ASSERT_EQ(on_table.size(), 1u);
+  const PoseError e = poseError(library()->model("blade").info, m.centroid("blade"), on_table[0].pose, truth);
+  EXPECT_LT(e.translation, 0.5e-3);
+  EXPECT_LT(e.rotation, 0.5 * M_PI / 180);
+  MatchStats st;
+  EXPECT_TRUE(m.locate({view}, {"blade"}, &st, nullptr, &above).empty());
+}
+
+// Fine PPF bins make the key range too large for the table's dense index (> 2^24 keys): the
+// table falls back to searching its sorted keys and must find the same part.
+TEST(ModelMatching, FinePpfBinsUseTheSearchedTable) {
+  MatchingConfig c = config();
+  c.ppf_angle_bins = 64;
+  c.ppf_distance_step = 0.0005;
+  ModelMatcher m(library(), c);
+  const Eigen::Isometry3d truth = onTable(0.5, -0.02, 1.1);
+  const ScanCloud view = singleViewCloud(library()->model("bracket").mesh, truth, kEye, 0.001, 2e-5, 21);
+  const auto d = m.locate({view}, {"bracket"});
+  ASSERT_EQ(d.size(), 1u);
+  const PoseError e = poseError(library()->model("bracket").info, m.centroid("bracket"), d[0].pose, truth);
+  EXPECT_LT(e.translation, 1e-3);
+  EXPECT_LT(e.rotation, 1 * M_PI / 180);
+}
+
+TEST(ModelMatching, BadInputGivesClearStatus) {
+  ModelMatcher m(library(), config());
+  ScanCloud empty, nan;
+  for (int i = 0; i < 100; ++i) nan.append(Eigen::Vector3f::Constant(NAN), 0.f);
+  MatchStats st;
+  EXPECT_TRUE(m.locate({empty, nan}, {"bracket"}, &st).empty());
+  ASSERT_EQ(st.warnings.size(), 2u);
+  EXPECT_NE(st.warnings[1].find("0 finite points"), std::string::npos) << st.warnings[1];
+  EXPECT_NE(errorOf([&] { m.locate({empty}, {"no_such_part"}); }).find("unknown model 'no_such_part'"), std::string::npos);
+  // a cluster above max_cluster_points is thinned with a warning and still located
+  MatchingConfig capped = config();
+  capped.max_cluster_points = 1000;
+  const Eigen::Isometry3d truth = onTable(0.5, 0.0, 0.9);
+  const ScanCloud view = singleViewCloud(library()->model("housing").mesh, truth, kEye, 0.0005, 2e-5, 5);
+  ASSERT_GT(view.size(), 4000u);
+  ModelMatcher mc(library(), capped);
+  MatchStats cs;
+  const auto found = mc.locate({view}, {"housing"}, &cs);
+  ASSERT_EQ(cs.warnings.size(), 1u);
+  EXPECT_NE(cs.warnings[0].find("above max_cluster_points 1000: thinned to"), std::string::npos) << cs.warnings[0];
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_LT(poseError(library()->model("housing").info, mc.centroid("housing"), found[0].pose, truth).translation, 1e-3);
+  MatchingConfig bad = config();
+  bad.coarse = "magic";
+  EXPECT_THROW(ModelMatcher(library(), bad), std::invalid_argument);
+  // the shipped settings load; a typo names file and key
+  EXPECT_EQ(loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml").coarse, "ppf");
+  const std::string path = ::testing::TempDir() + "/matching_typo.yaml";
+  std::ofstream(path) << "voxel: 0.002\nfitnes_radius: 0.002\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("fitnes_radius"), std::string::npos);
+  std::ofstream(path) << "min_fitness: 1.5\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("min_fitness"), std::string::npos);
+  std::ofstream(path) << "ppf_max_bucket: 0\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("ppf_max_bucket"), std::string::npos);
+}
+
+// Real data (../shared/data/pointclouds): a reference scan as the model (thesis: "CAD mesh or
+// reference cloud"), whole-scene search (no cluster to cover).
+TEST(ModelMatchingRealData, Bunny045OntoBunny000) {
+  const std::string dir = std::string(CELLSIGHT_SOURCE_DIR) + "/../shared/data/pointclouds/stanford_bunny";
+  std::ifstream tf(dir + "/T_bun045_to_bun000.txt");
+  if (!tf) GTEST_SKIP() << "real data not found at " << dir << " (../shared/data)";
+  Eigen::Matrix4d M;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) tf >> M(r, c);
+  Eigen::Isometry3d truth(M);
+  auto lib = std::make_shared<ModelLibrary>();
+  const Eigen::Vector3f sensor(0, 0, 1);  // the range scanner looked down -z in scan coordinates
+  lib->addCloudModel("bun045", loadCloud(dir + "/bun045.ply"), sensor);
+  const ScanCloud scene = loadCloud(dir + "/bun000.ply");
+  MatchingConfig cfg;
+  cfg.viewpoint = sensor;
+  cfg.voxel = 0.003;
+  cfg.normal_radius = 0.006;
+  cfg.ppf_sampling = 0.005;
+  cfg.ppf_distance_step = 0.005;
+  cfg.inlier_distance = 0.004;
+  cfg.fitness_radius = 0.002;
+  cfg.min_coverage = 0;  // bun000 holds surface bun045 never saw
+  cfg.min_fitness = 0.3;
+  cfg.max_rmse = 0.002;
+  cfg.max_instances = 1;
+  ModelMatcher m(lib, cfg);
+  MatchStats st;
+  const auto d = m.locate({scene}, {}, &st);
+  ASSERT_EQ(d.size(), 1u);
+  const PoseError e = poseError(lib->model("bun045").info, m.centroid("bun045"), d[0].pose, truth);
+  std::printf("bun045 -> bun000: %.3f mm %.3f deg, fitness %.2f, rmse %.3f mm, %.2f s (%zu + %zu points)\n",
+              e.translation * 1e3, e.rotation * 180 / M_PI, d[0].fitness, d[0].rmse * 1e3, st.seconds,
+              lib->model("bun045").source_cloud.size(), scene.size());
+  EXPECT_LT(e.translation, 2e-3);
+  EXPECT_LT(e.rotation, 1 * M_PI / 180);
+}
+
+TEST(ModelMatchingRealData, PclMilkCartonInItsKinectScene) {
+  const std::string dir = std::string(CELLSIGHT_SOURCE_DIR) + "/../shared/data/pointclouds/pcl";
+  if (!std::ifstream(dir + "/milk.pcd")) GTEST_SKIP() << "real data not found at " << dir << " (../shared/data)";
+  auto lib = std::make_shared<ModelLibrary>();
+  const Eigen::Vector3f kinect = Eigen::Vector3f::Zero();  // the model was cut out of this scene: same frame
+  lib->addCloudModel("milk", loadCloud(dir + "/milk.pcd"), kinect);
+  const ScanCloud scene = loadCloud(dir + "/milk_cartoon_all_small_clorox.pcd");
+  MatchingConfig cfg;
+  cfg.viewpoint = kinect;
+  cfg.voxel = 0.005;
+  cfg.normal_radius = 0.012;
+  cfg.ppf_sampling = 0.01;
+  cfg.ppf_distance_step = 0.008;
+  cfg.inlier_distance = 0.008;
+  cfg.icp_spacing = 0.002;
+  cfg.fitness_radius = 0.005;
+  cfg.min_coverage = 0;  // a whole Kinect scene, not a cluster
+  cfg.min_fitness = 0.3;
+  cfg.max_rmse = 0.005;
+  cfg.max_instances = 1;
+  ModelMatcher m(lib, cfg);
+  MatchStats st;
+  const auto d = m.locate({scene}, {}, &st);
+  ASSERT_EQ(d.size(), 1u);
+  const PoseError e = poseError(lib->model("milk").info, m.centroid("milk"), d[0].pose, Eigen::Isometry3d::Identity());
+  std::printf("milk in milk_cartoon_all_small_clorox: %.3f mm %.3f deg, fitness %.2f, rmse %.3f mm, %.2f s (%zu points)\n",
+              e.translation * 1e3, e.rotation * 180 / M_PI, d[0].fitness, d[0].rmse * 1e3, st.seconds, scene.size());
+  EXPECT_LT(e.translation, 5e-3);
+  EXPECT_LT(e.rotation, 2 * M_PI / 180);
+}
+
+// A scanner loses a little at every edge (segment ends, the last line before an edge), so a
+// flat top's scanned patch is smaller than the face and slides inside it; ICP stops where the
+// first points reach an edge. Centring in the slack puts the pose in the middle: with the same
+// loss at every edge, at the truth.
+TEST(ModelMatching, CentringInTheSlackUndoesEvenEdgeLoss) {
+  MatchingConfig on = config(), off = config();
+  off.icp_centre_slack = false;
+  ModelMatcher centred(library(), on), pinned(library(), off);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> U(0, 1);
+  const Eigen::Vector4f table(0, 0, 1, 0);
+  std::vector<double> e_on, e_off;
+  for (const std::string part : {"blade", "housing", "holder"}) {
+    const TriangleMesh& mesh = library()->model(part).mesh;
+    const PlanarFaces faces = planarFaces(mesh);
+    for (int t = 0; t < 3; ++t) {
+      const Eigen::Isometry3d truth = onTable(0.40 + 0.24 * U(rng), -0.09 + 0.18 * U(rng), 2 * M_PI * U(rng));
+      const ScanCloud view = singleViewCloud(mesh, truth, kEye, 0.0005, 2e-5, rng());
+      ScanCloud eroded;  // without what lies within 1 mm of a crease
+      for (const auto& p : view.points) {
+        const Eigen::Vector3d q = truth.inverse() * p.cast<double>();
+        double d = 1;
+        for (const auto& g : faces.groups) {
+          for (const auto& [a, b] : g.creases) {
+            const Eigen::Vector3d e = b - a;
+            const double u = std::clamp((q - a).dot(e) / e.squaredNorm(), 0.0, 1.0);
+            d = std::min(d, (q - a - u * e).norm());
+          }
+        }
+        if (d > 0.001) eroded.append(p, 0.f);
+      }
+      for (auto* m : {&centred, &pinned}) {
+        const auto det = m->locate({eroded}, {part}, nullptr, nullptr, &table);
+        ASSERT_EQ(det.size(), 1u) << part;
+        const PoseError e = poseError(library()->model(part).info, m->centroid(part), det[0].pose, truth);
+        (m == &centred ? e_on : e_off).push_back(e.translation);
+      }
+    }
+  }
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  std::printf("1 mm edge loss, 9 views: median error centred %.3f mm, pinned %.3f mm\n", median(e_on) * 1e3,
+              median(e_off) * 1e3);
+  EXPECT_LT(median(e_on), 0.15e-3);
+  EXPECT_LT(median(e_on), 0.5 * median(e_off));
+}

@@ -1,0 +1,169 @@
+// Calibration: real chessboard data (../shared/data) and simulated laser-sheet calibration.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "cellsight/scanner/calibrate.hpp"
+#include "cellsight/eval/sim_scan.hpp"
+#include "sim/sim_test_scenes.hpp"
+
+using namespace cellsight;
+
+namespace {
+const std::string kData = std::string(CELLSIGHT_SOURCE_DIR) + "/../shared/data";
+bool exists(const std::string& p) {
+  struct stat st {};
+  return ::stat(p.c_str(), &st) == 0;
+}
+#define REQUIRE_DATA(path)                                                         \
+  if (!exists(path)) GTEST_SKIP() << "real data not found at " << (path) << " (../shared/data)"
+}  // namespace
+
+TEST(RealData, OpenCvChessboardFullModelMatchesOpenCvsOwnResult) {
+  const std::string dir = kData + "/calibration/opencv_chessboard_9x6";
+  REQUIRE_DATA(dir);
+  std::vector<std::string> files;
+  for (int i : {1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14}) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "/left%02d.jpg", i);
+    files.push_back(dir + name);
+  }
+  const IntrinsicsResult full = calibrateIntrinsics(files, {{9, 6}, 0.025}, DistortionModel::kFull);
+  const IntrinsicsResult k1 = calibrateIntrinsics(files, {{9, 6}, 0.025}, DistortionModel::kK1);
+  std::printf("opencv_chessboard_9x6: full model RMS %.4f px (OpenCV 0.393), k1 only %.4f px, fx %.2f\n",
+              full.rms_px, k1.rms_px, full.camera.fx);
+  EXPECT_EQ(full.used.size(), 13u);
+  EXPECT_NEAR(full.rms_px, 0.393, 0.0393);
+  EXPECT_NEAR(full.camera.fx, 535.92, 5.0);
+  EXPECT_GE(k1.rms_px, full.rms_px);
+}
+
+TEST(RealData, FabScanPiChessboardAndLaserFrames) {
+  const std::string dir = kData + "/laser/fabscanpi";
+  REQUIRE_DATA(dir);
+  std::vector<std::string> files;
+  for (int i = 0; i <= 40; i += 8) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "/calibration_8x10/calibration_%03d.jpg", i);
+    files.push_back(dir + name);
+  }
+  const IntrinsicsResult r = calibrateIntrinsics(files, {{8, 10}, 0.007}, DistortionModel::kFull);
+  std::printf("fabscanpi: %zu views, RMS %.3f px, fx %.1f cx %.1f cy %.1f\n", r.used.size(), r.rms_px, r.camera.fx,
+              r.camera.cx, r.camera.cy);
+  EXPECT_GE(r.used.size(), 4u);
+  EXPECT_LT(r.rms_px, 1.0);
+  EXPECT_NEAR(r.camera.cx, 1640 / 2.0, 60);  // landscape frames: principal point near the centre
+  LineExtractionConfig c;
+  c.channel = 0;  // red laser
+  int scanned = 0, found = 0;
+  for (int i = 10; i <= 90; i += 20) {
+    char name[96];
+    std::snprintf(name, sizeof(name), "/scan_res1_laser1/20210213-230202_%03d.jpg", i);
+    cv::Mat img = cv::imread(dir + name, cv::IMREAD_COLOR);
+    ASSERT_FALSE(img.empty()) << name;
+    cv::cvtColor(img, img, cv::COLOR_BGR2RGB);
+    LineExtractionStats st;
+    extractLine(img, c, &st);
+    scanned += st.scanned;
+    found += st.found;
+  }
+  EXPECT_GT(double(found) / scanned, 0.4);
+}
+
+TEST(Calibration, FrameFromThreeTaughtPoints) {
+  const Eigen::Isometry3d T = frameFromThreePoints({0.5, 0.1, 0.02}, {0.6, 0.1, 0.02}, {0.45, 0.3, 0.02});
+  EXPECT_TRUE(T.linear().isApprox(Eigen::Matrix3d::Identity(), 1e-12));
+  EXPECT_THROW(frameFromThreePoints({0, 0, 0}, {1, 0, 0}, {2, 0, 0}), std::invalid_argument);
+}
+
+TEST(Calibration, ExtrinsicsFromASyntheticPatternImage) {
+  // A 9x6 board (25 mm) drawn into a 1280x960 camera at a known pose by a homography.
+  const ChessboardSpec board{{9, 6}, 0.025};
+  CameraIntrinsics cam{"c", 1280, 960, 1100, 1100, 639.5, 479.5, {0, 0, 0, 0, 0}};
+  Eigen::Isometry3d T_camera_pattern = Eigen::Translation3d(-0.1, -0.06, 0.6) *
+                                       Eigen::AngleAxisd(0.2, Eigen::Vector3d(1, 0.5, 0).normalized());
+  const int px_per_sq = 40, margin = 60;
+  cv::Mat flat(px_per_sq * 7 + 2 * margin, px_per_sq * 10 + 2 * margin, CV_8UC1, cv::Scalar(255));
+  for (int r = 0; r < 7; ++r)
+    for (int c = 0; c < 10; ++c)
+      if ((r + c) % 2 == 0)
+        cv::rectangle(flat, cv::Rect(margin + c * px_per_sq, margin + r * px_per_sq, px_per_sq, px_per_sq), 0, cv::FILLED);
+  // Flat-image pixel → pattern metres: the first inner corner is at (margin + px, margin + px).
+  std::vector<cv::Point2f> src, dst;
+  for (auto [x, y] : std::vector<std::pair<double, double>>{{0, 0}, {0.2, 0}, {0.2, 0.15}, {0, 0.15}}) {
+    src.emplace_back(static_cast<float>(margin + px_per_sq + x / 0.025 * px_per_sq),
+                     static_cast<float>(margin + px_per_sq + y / 0.025 * px_per_sq));
+    const Eigen::Vector2d uv = cam.project(T_camera_pattern * Eigen::Vector3d(x, y, 0));
+    dst.emplace_back(static_cast<float>(uv.x()), static_cast<float>(uv.y()));
+  }
+  cv::Mat img;
+  cv::warpPerspective(flat, img, cv::getPerspectiveTransform(src, dst), cv::Size(1280, 960), cv::INTER_LINEAR,
+                      cv::BORDER_CONSTANT, cv::Scalar(128));
+  const Eigen::Isometry3d T_base_pattern = Eigen::Translation3d(0.4, 0.0, 0.0) * Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ());
+  const ExtrinsicsResult r = calibrateExtrinsics(img, board, cam, T_base_pattern);
+  const Eigen::Isometry3d truth = T_base_pattern * T_camera_pattern.inverse();
+  EXPECT_LT(r.rms_px, 0.3);
+  EXPECT_LT((r.T_base_camera.translation() - truth.translation()).norm(), 1e-3);
+  EXPECT_LT(Eigen::AngleAxisd(r.T_base_camera.linear().transpose() * truth.linear()).angle(), 2e-3);
+}
+
+namespace {
+double angleBetweenPlanes(const Plane& a, const Plane& b) {
+  return std::acos(std::min(1.0, std::abs(a.n.dot(b.n))));
+}
+double offsetAtPoint(const Plane& a, const Plane& b, const Eigen::Vector3d& p) {
+  // distance along the normal between the planes near p
+  return std::abs(a.distance(p) - (a.n.dot(b.n) > 0 ? 1 : -1) * b.distance(p));
+}
+}  // namespace
+
+TEST(Calibration, LaserSheetLeastSquaresRecoversTheSimulatedSheet) {
+  Scene s = cellsight_test::planeScene();
+  s.scanner_camera.intrinsics = {"c", 1280, 960, 1500, 1500, 639.5, 479.5, {-0.05, 0.02, 0, 0, 0}};
+  s.scanner_camera.T_base_camera = cellsight_test::lookDown({0, 0, 0.6});
+  s.noise.enabled = true;
+  s.laser.line_width = 0.8e-3;
+  s.laser.T_flange_laser = Eigen::Translation3d(0, 0.06, 0.04) * Eigen::AngleAxisd(0.5236, Eigen::Vector3d::UnitX());
+  ScannerRenderer r(std::make_shared<CellGeometry>(s));
+  std::vector<LaserObservation> obs;
+  for (int i = 0; i < 8; ++i) {  // several heights and tilts over a flat plate (the table)
+    Eigen::Isometry3d F = cellsight_test::lookDown({0.01 * i, -0.12 + 0.01 * i, 0.22 + 0.02 * i});
+    F.rotate(Eigen::AngleAxisd(0.05 * (i % 3) - 0.05, Eigen::Vector3d::UnitX()));
+    obs.push_back({r.render(F, 10 + i), F, 0.0, 0.0});
+  }
+  const LaserCalibrationResult res = calibrateLaserLeastSquares(obs, s.scanner_camera.intrinsics,
+                                                                s.scanner_camera.T_base_camera, {});
+  const Plane truth = laserPlane(s.laser.T_flange_laser);
+  std::printf("sheet LSQ: %zu points, RMS %.4f mm, angle error %.4f deg, offset %.4f mm, spread %.3f\n", res.points,
+              res.rms_m * 1e3, angleBetweenPlanes(res.plane_flange, truth) * 180 / M_PI,
+              offsetAtPoint(res.plane_flange, truth, Eigen::Vector3d(0, 0.1, 0.25)) * 1e3, res.spread_ratio);
+  EXPECT_LT(angleBetweenPlanes(res.plane_flange, truth), 0.02 * M_PI / 180);
+  EXPECT_LT(offsetAtPoint(res.plane_flange, truth, Eigen::Vector3d(0, 0.1, 0.25)), 0.02e-3);
+  EXPECT_NEAR(laserPlane(res.T_flange_laser).distance(Eigen::Vector3d(0, 0.1, 0.25)),
+              res.plane_flange.distance(Eigen::Vector3d(0, 0.1, 0.25)), 1e-12);
+  // One pose over one plate: all points on one line → refused, not a silent wrong answer.
+  EXPECT_THROW(calibrateLaserLeastSquares({obs[0]}, s.scanner_camera.intrinsics, s.scanner_camera.T_base_camera, {}),
+               std::runtime_error);
+}
+
+TEST(Calibration, LaserSheetThreePointPlateAndGaugeBlock) {
+  const std::string dir = cellsight_test::tempDir();
+  Scene s = cellsight_test::planeScene();
+  s.scanner_camera.intrinsics = {"c", 1280, 960, 1500, 1500, 639.5, 479.5, {0, 0, 0, 0, 0}};
+  s.scanner_camera.T_base_camera = cellsight_test::lookDown({0, 0, 0.6});
+  s.noise.enabled = false;
+  s.laser.line_width = 0.8e-3;
+  s.laser.T_flange_laser = Eigen::Translation3d(0, 0.06, 0.04) * Eigen::AngleAxisd(0.5236, Eigen::Vector3d::UnitX());
+  cellsight_test::addObject(s, dir, "gauge", makeBox({0.05, 0.04, 0.02}), Eigen::Isometry3d(Eigen::Translation3d(0.04, 0.0, 0.01)));
+  ScannerRenderer r(std::make_shared<CellGeometry>(s));
+  // Flange such that the sheet crosses the plate and the 20 mm block (line near y = 0).
+  const Eigen::Isometry3d F = cellsight_test::lookDown({0.0, -0.07, 0.26});
+  LaserObservation o{r.render(F, 3), F, 0.0, 0.02};
+  const LaserCalibrationResult res = calibrateLaserThreePoint(o, s.scanner_camera.intrinsics, s.scanner_camera.T_base_camera, {});
+  const Plane truth = laserPlane(s.laser.T_flange_laser);
+  std::printf("sheet three-point: angle error %.4f deg\n", angleBetweenPlanes(res.plane_flange, truth) * 180 / M_PI);
+  EXPECT_LT(angleBetweenPlanes(res.plane_flange, truth), 0.2 * M_PI / 180);
+}

@@ -1,0 +1,181 @@
+#include <gtest/gtest.h>
+
+#include <opencv2/core.hpp>
+#include <random>
+
+#include "cellsight/scanner/accuracy.hpp"
+#include "cellsight/scanner/line_extraction.hpp"
+#include "cellsight/scanner/triangulation.hpp"
+#include "test_helpers.hpp"
+
+using namespace cellsight;
+
+namespace {
+// A synthetic line: Gaussian across rows with centre v(u) = v0 + slope·u, sigma in px.
+cv::Mat syntheticLine(int w, int h, double v0, double slope, double sigma, double peak, double bg,
+                      double noise = 0, unsigned seed = 1) {
+  cv::Mat img(h, w, CV_8UC1);
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0, noise > 0 ? noise : 1);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const double c = v0 + slope * u;
+      // Pixel-integrated Gaussian (erf differences) so the true centre is exactly c.
+      const double a = (v - 0.5 - c) / (std::sqrt(2.0) * sigma), b = (v + 0.5 - c) / (std::sqrt(2.0) * sigma);
+      const double x = bg + peak * std::sqrt(M_PI / 2) * sigma * (std::erf(b) - std::erf(a)) +
+                       (noise > 0 ? noise * n(rng) : 0);
+      img.at<uint8_t>(v, u) = cv::saturate_cast<uint8_t>(x);
+    }
+  }
+  return img;
+}
+}  // namespace
+
+TEST(LineExtraction, EveryEstimatorFindsTheKnownCentreNoiseFree) {
+  const cv::Mat img = syntheticLine(400, 200, 80.3, 0.05, 1.2, 200, 10);
+  for (auto est : {LineExtractionConfig::Estimator::kRunCentre, LineExtractionConfig::Estimator::kCentroid,
+                   LineExtractionConfig::Estimator::kGaussian3}) {
+    LineExtractionConfig c;
+    c.estimator = est;
+    c.smoothing_degree = 0;
+    LineExtractionStats st;
+    const auto pts = extractLine(img, c, &st);
+    ASSERT_GT(pts.size(), 380u);
+    double max_err = 0;
+    for (const auto& p : pts) max_err = std::max(max_err, std::abs(p.v - (80.3 + 0.05 * p.u)));
+    EXPECT_LT(max_err, 0.06) << "estimator " << static_cast<int>(est);
+    EXPECT_NEAR(st.background, 10, 1);
+  }
+}
+
+TEST(LineExtraction, SmoothingReducesNoiseOnAStraightLine) {
+  const cv::Mat img = syntheticLine(600, 200, 100.0, 0.02, 1.2, 120, 10, 4.0, 3);
+  auto rms = [&](int degree) {
+    LineExtractionConfig c;
+    c.smoothing_degree = degree;
+    double s2 = 0;
+    const auto pts = extractLine(img, c);
+    for (const auto& p : pts) s2 += std::pow(p.v - (100.0 + 0.02 * p.u), 2);
+    return std::sqrt(s2 / pts.size());
+  };
+  EXPECT_LT(rms(2), 0.6 * rms(0));
+}
+
+TEST(LineExtraction, ReflectionMakesAColumnAmbiguous) {
+  cv::Mat img = syntheticLine(200, 200, 50.0, 0.0, 1.2, 200, 10);
+  for (int u = 100; u < 120; ++u) {
+    for (int v = 150; v < 153; ++v) img.at<uint8_t>(v, u) = 230;  // a strong second spot
+  }
+  LineExtractionConfig c;
+  c.segment_erode = 0;
+  LineExtractionStats st;
+  const auto pts = extractLine(img, c, &st);
+  EXPECT_EQ(st.ambiguous, 20);
+  for (const auto& p : pts) EXPECT_TRUE(p.u < 100 || p.u >= 120);
+}
+
+TEST(LineExtraction, EdgeFilterDropsSegmentEndsAndJumps) {
+  cv::Mat img = syntheticLine(200, 200, 50.0, 0.0, 1.2, 200, 10);
+  cv::Mat step = syntheticLine(200, 200, 80.0, 0.0, 1.2, 200, 10);
+  step.colRange(100, 200).copyTo(img.colRange(100, 200));  // depth edge at u = 100
+  LineExtractionConfig c;
+  c.smoothing_degree = 0;
+  LineExtractionStats st;
+  const auto pts = extractLine(img, c, &st);
+  EXPECT_EQ(st.edge, 8);  // 2 at each end of two segments
+  for (const auto& p : pts) EXPECT_FALSE(p.u >= 98 && p.u <= 101);
+}
+
+TEST(LineExtraction, BadFramesGiveNoPointsOrAClearError) {
+  LineExtractionConfig c;
+  LineExtractionStats st;
+  cv::Mat dark(100, 100, CV_8UC1, cv::Scalar(12));
+  EXPECT_TRUE(extractLine(dark, c, &st).empty());
+  EXPECT_EQ(st.no_line, 100);
+  cv::Mat saturated(100, 100, CV_8UC1, cv::Scalar(255));
+  EXPECT_TRUE(extractLine(saturated, c).empty());
+  EXPECT_THROW(extractLine(cv::Mat(10, 10, CV_16UC1), c), std::invalid_argument);
+  EXPECT_THROW(extractLine(cv::Mat(), c), std::invalid_argument);
+  cv::Mat rgb(100, 100, CV_8UC3, cv::Scalar(0, 0, 0));
+  EXPECT_THROW(extractLine(rgb, c), std::invalid_argument);  // channel not chosen
+}
+
+TEST(LineExtraction, ColourChannelAndColumnOrientation) {
+  const cv::Mat mono = syntheticLine(300, 120, 60.25, 0.0, 1.2, 200, 10);
+  cv::Mat zero(mono.size(), CV_8UC1, cv::Scalar(10));
+  cv::Mat rgb;
+  cv::merge(std::vector<cv::Mat>{mono, zero, zero}, rgb);
+  LineExtractionConfig c;
+  c.channel = 0;
+  EXPECT_GT(extractLine(rgb, c).size(), 280u);
+  c.channel = 1;
+  EXPECT_TRUE(extractLine(rgb, c).empty());
+  LineExtractionConfig cols;
+  cols.line_along_rows = false;
+  const auto pts = extractLine(mono.t(), cols);
+  ASSERT_GT(pts.size(), 280u);
+  EXPECT_NEAR(pts[50].u, 60.25, 0.05);  // transposed: the centre is a column position
+}
+
+TEST(Triangulation, RayPlaneIntersectionRecoversPointsOnTheSheet) {
+  CameraIntrinsics K{"c", 1920, 1080, 2400, 2400, 962.5, 537, {-0.08, 0.05, 3e-4, -2e-4, 0}};
+  Plane sheet;
+  sheet.n = Eigen::Vector3d(0, 0.866, 0.5).normalized();
+  sheet.d = -0.25;
+  std::vector<LinePoint> line;
+  std::vector<Eigen::Vector3d> truth;
+  for (double x = -0.1; x <= 0.1; x += 0.01) {
+    // A point on the sheet at depth ~0.5 m.
+    Eigen::Vector3d p(x, 0, 0);
+    p.z() = (-sheet.d - sheet.n.y() * p.y() - sheet.n.x() * x) / sheet.n.z();
+    p.y() = 0.02;
+    p.z() = (-sheet.d - sheet.n.y() * p.y() - sheet.n.x() * x) / sheet.n.z();
+    truth.push_back(p);
+    const Eigen::Vector2d uv = K.project(p);
+    line.push_back({static_cast<float>(uv.x()), static_cast<float>(uv.y()), 100, 3});
+  }
+  const UndistortionMap map(K);
+  for (const auto& prof : {triangulate(line, K, sheet), triangulate(line, map, sheet)}) {
+    ASSERT_EQ(prof.size(), truth.size());
+    for (size_t i = 0; i < truth.size(); ++i) {
+      // float pixel coordinates limit this to ~1e-7 m
+      EXPECT_LT((prof[i].p - truth[i]).norm(), 2e-6) << i;
+    }
+  }
+  Plane parallel;  // the sheet contains the camera's rays: nothing can be triangulated
+  parallel.n = Eigen::Vector3d(1, 0, 0);
+  parallel.d = 0.0;
+  EXPECT_TRUE(triangulate(line, K, parallel).empty());
+}
+
+TEST(Accuracy, SphereFitMpeAlAndFlatness) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> n(0, 1e-5);
+  std::vector<Eigen::Vector3d> pts;
+  const Eigen::Vector3d c(0.6, -0.07, 0.0125);
+  for (int i = 0; i < 2000; ++i) {
+    Eigen::Vector3d d(n(rng), n(rng), std::abs(n(rng)) + 1e-6);  // upper hemisphere
+    d = Eigen::Vector3d::Random();
+    d.z() = std::abs(d.z());
+    d.normalize();
+    pts.push_back(c + (0.0125 + n(rng)) * d);
+  }
+  const SphereFit f = fitSphere(pts);
+  ASSERT_TRUE(f.ok);
+  EXPECT_LT((f.center - c).norm(), 2e-6);
+  EXPECT_NEAR(f.radius, 0.0125, 2e-6);
+  EXPECT_NEAR(f.rms, 1e-5, 2e-6);
+  EXPECT_GT(f.max_abs_dev, 2e-5);
+  EXPECT_LT(f.max_abs_dev, 6e-5);
+  EXPECT_NEAR(fitSphere(pts, 0.0125).radius, 0.0125, 1e-12);
+  // Smallest enclosing sphere: a regular tetrahedron of edge a has circumradius a·√(3/8).
+  const double a = 1e-4;
+  std::vector<Eigen::Vector3d> tet = {{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}};
+  for (auto& p : tet) p *= a / std::sqrt(8.0);
+  tet.push_back(Eigen::Vector3d::Zero());  // inside
+  EXPECT_NEAR(minimumEnclosingDiameter(tet), 2 * a * std::sqrt(3.0 / 8.0), 1e-12);
+  EXPECT_NEAR(minimumEnclosingDiameter({{0, 0, 0}, {3e-5, 0, 0}, {1e-5, 1e-6, 0}}), 3e-5, 1e-12);
+  std::vector<Eigen::Vector3d> plane;
+  for (int i = 0; i < 100; ++i) plane.push_back({i * 1e-3, (i % 7) * 1e-3, (i % 2 ? 1 : -1) * 1e-5});
+  EXPECT_NEAR(fitPlane(plane).flatness, 2e-5, 1e-6);
+}
