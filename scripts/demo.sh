@@ -66,8 +66,12 @@ sleep 3  # let rviz draw the last frame
 screenshot "$OUT/rviz.png"
 # What the 2 MP frames cost between processes (nodelets pass them by pointer inside the manager).
 FRAMES=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["frames"])' "$OUT/scan_result.json")
-/usr/bin/python3 scripts/topic-bytes.py /scanner_camera/image_raw --frames "$FRAMES" >"$OUT/image_bytes.json" \
-  || echo "demo: warning: could not read the image topic's bus statistics" >&2
+if /usr/bin/python3 scripts/topic-bytes.py /scanner_camera/image_raw --frames "$FRAMES" >"$OUT/image_bytes.json.tmp"; then
+  mv "$OUT/image_bytes.json.tmp" "$OUT/image_bytes.json"
+else
+  rm -f "$OUT/image_bytes.json.tmp"
+  echo "demo: warning: could not read the image topic's bus statistics" >&2
+fi
 kill -INT "$LAUNCH_PID"
 wait "$LAUNCH_PID" || true
 LAUNCH_PID=""

@@ -24,16 +24,23 @@ def main():
     subscribers = next((nodes for t, nodes in subs if t == topic), [])
     result = {"topic": topic, "publishers": {}, "subscribers": sorted(subscribers), "bytes_sent": 0, "messages_sent": 0}
     for node in publishers:
-        code, msg, stats = xmlrpc.client.ServerProxy(master.lookupNode(node)).getBusStats("/topic_bytes")
-        if code != 1:
-            raise RuntimeError("getBusStats of %s failed: %s" % (node, msg))
-        for pub_topic, _data_sent, connections in stats[0]:
+        answer = xmlrpc.client.ServerProxy(master.lookupNode(node)).getBusStats("/topic_bytes")
+        # roscpp answers [publish, subscribe]; rospy [code, message, [publish, subscribe, services]]
+        if len(answer) == 3 and isinstance(answer[0], int):
+            if answer[0] != 1:
+                raise RuntimeError("getBusStats of %s failed: %s" % (node, answer[1]))
+            answer = answer[2]
+        for pub_topic, connections in ((t[0], t[-1]) for t in answer[0]):
             if pub_topic != topic:
                 continue
-            sent = sum(c[1] for c in connections)
-            result["publishers"][node] = {"tcp_connections": len(connections), "bytes_sent": sent}
-            result["bytes_sent"] += sent
-            result["messages_sent"] = max([result["messages_sent"]] + [c[2] for c in connections])
+            # a connection: [id, bytes sent, ..., messages sent, ...]; one that never sent a byte
+            # is a subscriber in the same process (the message passed by pointer) or an idle one
+            sent = [c[1] for c in connections]
+            result["publishers"][node] = {"connections": len(connections),
+                                          "connections_that_sent_bytes": sum(1 for b in sent if b > 0),
+                                          "bytes_sent": sum(sent)}
+            result["bytes_sent"] += sum(sent)
+            result["messages_sent"] = max([result["messages_sent"]] + [c[-2] for c in connections])
     if frames > 0:
         result["frames"] = frames
         result["bytes_sent_per_frame"] = result["bytes_sent"] / frames
