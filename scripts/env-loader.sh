@@ -14,4 +14,10 @@ for setup in "${CELLSIGHT_BUILD:-}/devel/setup.bash" "$HERE/_build/devel/setup.b
   fi
 done
 export ROS_HOME=${ROS_HOME:-$HOME/.ros}
+# the address this PC's nodes advertise: ROS_IP from the environment, else the first address of
+# this host (a name the cell PC may not resolve would break the connections)
+if [ -z "${ROS_IP:-}" ] && [ -z "${ROS_HOSTNAME:-}" ]; then
+  ROS_IP=$(hostname -I 2>/dev/null | cut -d' ' -f1)
+  [ -n "$ROS_IP" ] && export ROS_IP
+fi
 exec "$@"

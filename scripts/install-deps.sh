@@ -44,4 +44,11 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 echo "install-deps: installing ${#missing[@]} packages: ${missing[*]}"
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+# openssh-server is only for the two-PC test (which runs its own sshd on 127.0.0.2): when this
+# script installed it on a systemd machine, the system sshd it started on port 22 is stopped and
+# disabled again (an sshd the machine already had is left alone)
+if [[ " ${missing[*]} " == *" openssh-server "* ]] && [ -d /run/systemd/system ]; then
+  $SUDO systemctl disable --now ssh.service >/dev/null 2>&1 &&
+    echo "install-deps: openssh-server installed for the tests; its system service is disabled"
+fi
 echo "install-deps: done"

@@ -35,7 +35,8 @@ def main():
                 continue
             # a connection: [id, bytes sent, ..., messages sent, ...]; one that never sent a byte
             # is a subscriber in the same process (the message passed by pointer) or an idle one
-            sent = [c[1] for c in connections]
+            # roscpp reports the byte count as a 32-bit int: undo one wrap (2-4 GiB per connection)
+            sent = [c[1] + 2**32 if c[1] < 0 else c[1] for c in connections]
             result["publishers"][node] = {"connections": len(connections),
                                           "connections_that_sent_bytes": sum(1 for b in sent if b > 0),
                                           "bytes_sent": sum(sent)}

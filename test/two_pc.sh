@@ -25,14 +25,24 @@ PC2=127.0.0.2
 PORT=$(free_port)
 pids=()
 cleanup() {
+  trap - EXIT INT TERM
   for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null; done
-  sleep 2
+  for _ in $(seq 50); do
+    alive=0
+    for p in "${pids[@]}"; do kill -0 "$p" 2>/dev/null && alive=1; done
+    [ $alive = 0 ] && break
+    sleep 0.1
+  done
   for p in "${pids[@]}"; do kill -9 "$p" 2>/dev/null; done
-  pkill -f "sshd -f $WORK/sshd_config" 2>/dev/null
+  # whatever the second PC still runs (its roslaunch child, model_matching) and its sshd
+  pkill -9 -f "$WORK/pc2home" 2>/dev/null
+  pkill -9 -f "sshd -f $WORK/sshd_config" 2>/dev/null
   userdel -f "$PC2_USER" 2>/dev/null
+  rm -rf "$WORK/home/.ssh" "$WORK/authorized_keys" "$WORK/host_key" "$WORK/host_key.pub"
   return 0
 }
 trap cleanup EXIT
+trap 'cleanup; exit 1' INT TERM
 userdel -f "$PC2_USER" 2>/dev/null
 useradd -o -u 0 -g 0 -M -p "*" -d "$WORK/pc2home" -s /bin/bash "$PC2_USER" 2>/dev/null || { echo "FAIL: useradd"; exit 1; }
 ssh-keygen -q -t ed25519 -N "" -f "$WORK/host_key" && ssh-keygen -q -t ed25519 -N "" -f "$WORK/home/.ssh/id_ed25519"
@@ -57,8 +67,10 @@ pids+=($!)
 { echo "$PC2 $(cut -d' ' -f1,2 "$WORK/host_key.pub")"; echo "[$PC2]:$PORT $(cut -d' ' -f1,2 "$WORK/host_key.pub")"; } \
   >"$WORK/home/.ssh/known_hosts"
 printf 'Host %s\n  IdentityFile %s\n' "$PC2" "$WORK/home/.ssh/id_ed25519" >"$WORK/home/.ssh/config"
-# the second PC finds this build through CELLSIGHT_BUILD, then the project's env-loader
-printf '#!/usr/bin/env bash\nexport CELLSIGHT_BUILD=%s ROS_HOME=%s/pc2home/ros\nexec %s/scripts/env-loader.sh "$@"\n' \
+# the second PC finds this build through CELLSIGHT_BUILD, then the project's env-loader. Its nodes
+# advertise 127.0.0.1: roscpp binds its TCPROS server to 127.0.0.1 alone whenever ROS_IP is a
+# loopback address, so 127.0.0.2 would be advertised but not served (a real PC has its own address)
+printf '#!/usr/bin/env bash\nexport CELLSIGHT_BUILD=%s ROS_HOME=%s/pc2home/ros ROS_IP=127.0.0.1\nexec %s/scripts/env-loader.sh "$@"\n' \
   "$BUILD" "$WORK" "$ROOT" >"$WORK/env-loader.sh"
 chmod +x "$WORK/env-loader.sh"
 for _ in $(seq 50); do (exec 3<>"/dev/tcp/$PC2/$PORT") 2>/dev/null && break; sleep 0.1; done
@@ -68,15 +80,16 @@ HOME="$WORK/home" roslaunch -p "${ROS_MASTER_URI##*:}" cellsight cell.launch tri
   >"$WORK/launch.log" 2>&1 &
 pids+=($!)
 ok=0
-for _ in $(seq 120); do
+deadline=$(( $(date +%s) + 60 ))  # well inside ctest's 180 s: the cleanup must run
+while [ "$(date +%s)" -lt "$deadline" ]; do
   if rosservice list 2>/dev/null | grep -q "^/model_matching/locate_objects$"; then ok=1; break; fi
-  grep -q "RLException" "$WORK/launch.log" && break
+  grep -qE "RLException|failed to launch|has died" "$WORK/launch.log" && break
   sleep 0.5
 done
 fail() { echo "FAIL: $*"; echo "--- launch.log"; tail -20 "$WORK/launch.log"; echo "--- sshd.log"; tail -5 "$WORK/sshd.log"; exit 1; }
 [ $ok = 1 ] || fail "model_matching did not come up on the second PC"
 grep -q "remote\[$PC2-0\]" "$WORK/launch.log" || fail "roslaunch did not start a remote child on $PC2"
-pid=$(pgrep -f "model_matching __name:=model_matching" | head -1)
+pid=$(pgrep -f "model_matching __name:=model_matching.*$WORK/pc2home" | head -1)
 [ -n "$pid" ] || fail "no model_matching process"
 chain=""
 p=$pid

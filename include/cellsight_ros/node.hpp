@@ -44,7 +44,9 @@ int runNode(int argc, char** argv, const std::string& name, int threads = 1) {
 
 // The node object lives as long as the nodelet; callbacks run on the manager's worker threads
 // (multi-threaded handles: give the manager enough workers for the nodes' blocking callbacks).
-// A node that cannot start logs FATAL and stays unloaded; the manager and its other nodelets run on.
+// A node that cannot start logs FATAL and the load fails (the loader catches the exception and
+// drops the nodelet, `nodelet load` exits non-zero, so a required launch node stops the launch);
+// the manager and its other nodelets run on.
 #define CELLSIGHT_NODE(Class, name, threads)                                          \
   namespace cellsight_nodelets {                                                      \
   class Class : public nodelet::Nodelet {                                             \
@@ -55,6 +57,7 @@ int runNode(int argc, char** argv, const std::string& name, int threads = 1) {
         node_ = std::make_unique<::Class>(nh_, pnh_);                                 \
       } catch (const std::exception& e) {                                             \
         NODELET_FATAL("%s cannot start: %s", getName().c_str(), e.what());            \
+        throw;                                                                        \
       }                                                                               \
     }                                                                                 \
     ros::NodeHandle nh_, pnh_;                                                        \

@@ -67,7 +67,14 @@ CalibrationSet loadCalibrationFolder(const std::string& folder) {
     const std::string path = folder + "/" + name;
     YAML::Node node = loadYamlFile(path);
     if (node.IsMap() && node["parent_frame"]) {
-      set.transforms.emplace_back(path, loadTransformCalibration(path));
+      TransformCalibration cal = loadTransformCalibration(path);
+      for (const auto& [other, seen] : set.transforms) {
+        if (seen.child_frame == cal.child_frame) {
+          throw ConfigError(path + ": frame '" + cal.child_frame + "' is already calibrated in " + other +
+                            " (one file per frame: remove or merge one of them)");
+        }
+      }
+      set.transforms.emplace_back(path, std::move(cal));
     } else if (node.IsMap() && node["camera_matrix"]) {
       loadCameraInfoYaml(path);  // validates
       set.camera_files.push_back(path);

@@ -11,7 +11,9 @@ NodeDiagnostics::NodeDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& pnh, cons
     : updater_(nh, pnh), what_(what) {
   updater_.setHardwareID("cellsight");
   updater_.add(name, this, &NodeDiagnostics::produce);
-  timer_ = nh.createTimer(ros::Duration(period), [this](const ros::TimerEvent&) { updater_.update(); });
+  // force_update: update() waits a full period after the last publication and, with timer jitter,
+  // skips every other tick
+  timer_ = nh.createTimer(ros::Duration(period), [this](const ros::TimerEvent&) { updater_.force_update(); });
 }
 
 void NodeDiagnostics::processed(double seconds) {

@@ -5,6 +5,8 @@
 // the frames and the stamp; no identity, no "latest" fallback.
 #include <message_filters/subscriber.h>
 #include <ros/ros.h>
+
+#include <atomic>
 #include <sensor_msgs/CameraInfo.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/message_filter.h>
@@ -40,7 +42,7 @@ class LaserPlaneTracker {
                             msg->header.stamp.toSec(), msg->header.frame_id.c_str(), laser_frame_.c_str(),
                             reason == tf2_ros::filter_failure_reasons::OutTheBack ? "older than the tf buffer"
                                                                                  : "transform unavailable",
-                            dropped_, "base_link -> flange");
+                            dropped_.load(), "base_link -> flange");
         });
     plane_pub_ = nh.advertise<cellsight::LaserPlaneStamped>("scan/laser_plane", 20);
   }
@@ -65,7 +67,7 @@ class LaserPlaneTracker {
   message_filters::Subscriber<sensor_msgs::CameraInfo> info_sub_;
   tf2_ros::MessageFilter<sensor_msgs::CameraInfo> filter_;
   ros::Publisher plane_pub_;
-  unsigned long dropped_ = 0;
+  std::atomic<unsigned long> dropped_{0};  // failure callbacks may run on several threads (nodelet)
 };
 
 }  // namespace

@@ -16,6 +16,8 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <map>
 #include <exception>
 #include <mutex>
 #include <thread>
@@ -78,18 +80,21 @@ class ModelMatching {
     service_ = pnh.advertiseService("locate_objects", &ModelMatching::onLocate, this);
     // the settings file's acceptance thresholds are the starting values of ~ (rqt_reconfigure)
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<cellsight::MatchingAcceptanceConfig>>(reconfigure_mutex_, pnh);
-    const cellsight::AcceptanceThresholds t = cellsight::acceptanceOf(matcher_->config());
     cellsight::MatchingAcceptanceConfig start;
-    start.min_fitness = t.min_fitness;
-    start.min_coverage = t.min_coverage;
-    start.max_rmse = t.max_rmse;
-    start.max_instances = t.max_instances;
+    copyThresholds(cellsight::acceptanceOf(matcher_->config()), &start);
     reconfigure_->updateConfig(start);
     reconfigure_->setCallback([this](cellsight::MatchingAcceptanceConfig& c, uint32_t) { onReconfigure(c); });
     if (frame_rate > 0) frame_timer_ = nh.createTimer(ros::Duration(1.0 / frame_rate), &ModelMatching::onFrameTimer, this);
   }
 
  private:
+  static void copyThresholds(const cellsight::AcceptanceThresholds& t, cellsight::MatchingAcceptanceConfig* c) {
+    c->min_fitness = t.min_fitness;
+    c->min_coverage = t.min_coverage;
+    c->max_rmse = t.max_rmse;
+    c->max_instances = t.max_instances;
+  }
+
   /// New acceptance thresholds, checked like config/matching.yaml; refused ones are logged and
   /// the running values sent back. Callbacks are serial (one spinner thread): no locate() runs.
   void onReconfigure(cellsight::MatchingAcceptanceConfig& c) {
@@ -99,11 +104,7 @@ class ModelMatching {
                c.min_fitness, c.min_coverage, c.max_rmse * 1e3, c.max_instances);
     } catch (const std::exception& e) {
       ROS_ERROR("model_matching: reconfigure refused: %s; the running thresholds stay", e.what());
-      const cellsight::AcceptanceThresholds t = cellsight::acceptanceOf(matcher_->config());
-      c.min_fitness = t.min_fitness;
-      c.min_coverage = t.min_coverage;
-      c.max_rmse = t.max_rmse;
-      c.max_instances = t.max_instances;
+      copyThresholds(cellsight::acceptanceOf(matcher_->config()), &c);
     }
   }
 
@@ -147,7 +148,7 @@ class ModelMatching {
     const bool ok = locate(*clusters, req.models, &res.detections, &why);
     res.status = ok ? Res::OK : Res::NO_TRANSFORM;
     res.message = ok ? std::to_string(res.detections.detections.size()) + " detections" : why;
-    if (ok) publish(res.detections);
+    if (ok) publish(res.detections, req.models);
     return true;
   }
 
@@ -206,24 +207,41 @@ class ModelMatching {
     return true;
   }
 
+  /// Sends a frame unless tf already has it at that stamp or later (a repeated or older stamp
+  /// makes every listener warn). Called with mutex_ held.
+  void sendFrame(const geometry_msgs::TransformStamped& t) {
+    ros::Time& last = last_sent_[t.child_frame_id];
+    if (t.header.stamp <= last) return;
+    last = t.header.stamp;
+    broadcaster_.sendTransform(t);
+  }
+
   /// The latest detections' frames again, stamped now: tf keeps them while nothing new is scanned.
   void onFrameTimer(const ros::TimerEvent&) {
-    std::vector<geometry_msgs::TransformStamped> frames;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      frames = frames_;
-    }
+    std::lock_guard<std::mutex> lock(mutex_);
     const ros::Time now = ros::Time::now();
-    for (auto& t : frames) {
-      if (now > t.header.stamp) t.header.stamp = now;
-      broadcaster_.sendTransform(t);
+    for (geometry_msgs::TransformStamped t : frames_) {
+      t.header.stamp = std::max(now, t.header.stamp);
+      sendFrame(t);
     }
   }
 
-  void publish(const cellsight::DetectionArray& out) {
+  /// `models`: the models this result was searched for (empty: all); the instances and frames of
+  /// the others stay as they were.
+  void publish(const cellsight::DetectionArray& out, const std::vector<std::string>& models = {}) {
     detections_pub_.publish(out);
     std::vector<cellsight::NamedInstance> instances;
     std::vector<geometry_msgs::TransformStamped> frames;
+    if (!models.empty()) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      const auto searched = [&](const std::string& m) { return std::find(models.begin(), models.end(), m) != models.end(); };
+      for (const auto& i : instances_) {
+        if (searched(i.model)) continue;
+        instances.push_back(i);
+        for (const auto& f : frames_)
+          if (f.child_frame_id == i.name) frames.push_back(f);
+      }
+    }
     visualization_msgs::MarkerArray markers;
     visualization_msgs::Marker clear;
     clear.action = visualization_msgs::Marker::DELETEALL;
@@ -244,7 +262,6 @@ class ModelMatching {
       t.transform.translation.y = d.pose.position.y;
       t.transform.translation.z = d.pose.position.z;
       t.transform.rotation = d.pose.orientation;
-      broadcaster_.sendTransform(t);
       frames.push_back(t);
       instances.push_back({d.model, d.name, Eigen::Vector3d(d.pose.position.x, d.pose.position.y, d.pose.position.z)});
       visualization_msgs::Marker m;
@@ -276,7 +293,15 @@ class ModelMatching {
     }
     markers_pub_.publish(markers);
     {
+      // at the scan's stamp (exact-time lookups), then at once at `now` too, so a lookup of the
+      // latest pose does not return the previous result until the next timer tick
       std::lock_guard<std::mutex> lock(mutex_);
+      const ros::Time now = ros::Time::now();
+      for (geometry_msgs::TransformStamped t : frames) {
+        sendFrame(t);
+        t.header.stamp = std::max(now, t.header.stamp);
+        sendFrame(t);
+      }
       instances_ = std::move(instances);
       frames_ = std::move(frames);
     }
@@ -305,6 +330,7 @@ class ModelMatching {
   std::vector<cellsight::NamedInstance> instances_;     // the latest detections, for naming
   std::vector<geometry_msgs::TransformStamped> frames_;  // and their tf frames, re-published
   ros::Timer frame_timer_;
+  std::map<std::string, ros::Time> last_sent_;  // per frame: the newest stamp sent to tf
   tf2_ros::Buffer buffer_;
   tf2_ros::TransformListener listener_;
   tf2_ros::TransformBroadcaster broadcaster_;

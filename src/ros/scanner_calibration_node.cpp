@@ -75,6 +75,19 @@ class ScannerCalibration {
     }
   }
 
+  /// The file of ~calibration_dir that already calibrates `child_frame` (so the new result
+  /// replaces it), else <~calibration_dir>/<child_frame>.yaml; "" when the node has no folder.
+  std::string transformFileFor(const std::string& child_frame) const {
+    if (calibration_dir_.empty()) return "";
+    try {
+      for (const auto& [file, cal] : cellsight::loadCalibrationFolder(calibration_dir_).transforms)
+        if (cal.child_frame == child_frame) return file;
+    } catch (const std::exception&) {
+      // a missing or unreadable folder: the new file goes in under the frame's name
+    }
+    return fileFor(child_frame);
+  }
+
   /// <~calibration_dir>/<name>.yaml (the folder made when missing), or "" when the node has no
   /// folder (results only returned).
   std::string fileFor(const std::string& name) const {
@@ -136,7 +149,7 @@ class ScannerCalibration {
       c.residual_rms = r.rms_px;
       c.method = "pattern PnP + taught pattern frame (residual: reprojection RMS px)";
       c.date = cellsight::isoDateNow();
-      res.file = fileFor(c.child_frame);
+      res.file = transformFileFor(c.child_frame);
       if (!res.file.empty()) cellsight::saveTransformCalibration(res.file, c);
       res.transform = toMsg(c);
       res.rms_px = r.rms_px;
@@ -154,13 +167,15 @@ class ScannerCalibration {
                                     "observation (" + std::to_string(n) + " images)");
       }
       const cellsight::CameraIntrinsics cam = cellsight_ros::fromCameraInfo(req.camera_info);
-      const Eigen::Isometry3d T_base_camera = tf2::transformToEigen(req.camera_pose);
-      if (!T_base_camera.matrix().allFinite()) throw std::invalid_argument("camera_pose is not finite");
+      const Eigen::Isometry3d T_base_camera = cellsight_ros::fromTransformMsg(req.camera_pose);
       std::vector<cellsight::LaserObservation> obs(n);
       for (size_t i = 0; i < n; ++i) {
         obs[i].image = grey(req.images[i], "observation " + std::to_string(i));
-        tf2::fromMsg(req.flange_poses[i], obs[i].T_base_flange);
-        if (!obs[i].T_base_flange.matrix().allFinite()) throw std::invalid_argument("flange pose " + std::to_string(i) + " is not finite");
+        try {
+          obs[i].T_base_flange = cellsight_ros::fromPoseMsg(req.flange_poses[i]);
+        } catch (const std::exception& e) {
+          throw std::invalid_argument("flange pose " + std::to_string(i) + ": " + e.what());
+        }
         obs[i].plane_z = req.plane_z[i];
         obs[i].block_z = req.block_z.empty() ? 0.0 : req.block_z[i];
       }
@@ -180,7 +195,7 @@ class ScannerCalibration {
       c.residual_rms = r.rms_m;
       c.method = method + " light-sheet calibration (residual: m)";
       c.date = cellsight::isoDateNow();
-      res.file = fileFor(c.child_frame);
+      res.file = transformFileFor(c.child_frame);
       if (!res.file.empty()) cellsight::saveTransformCalibration(res.file, c);
       res.transform = toMsg(c);
       res.rms_mm = r.rms_m * 1e3;

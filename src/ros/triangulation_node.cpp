@@ -59,18 +59,21 @@ class Triangulation {
     // the settings file's thresholds are the starting values of ~ (rqt_reconfigure)
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<cellsight::ScannerLineConfig>>(reconfigure_mutex_, pnh);
     cellsight::ScannerLineConfig start;
-    const cellsight::LineThresholds t = cellsight::lineThresholdsOf(line_);
-    start.min_contrast = t.min_contrast;
-    start.threshold_fraction = t.threshold_fraction;
-    start.max_run = t.max_run;
-    start.secondary_peak_ratio = t.secondary_peak_ratio;
-    start.min_segment = t.min_segment;
-    start.segment_max_jump = t.segment_max_jump;
+    copyThresholds(cellsight::lineThresholdsOf(line_), &start);
     reconfigure_->updateConfig(start);
     reconfigure_->setCallback([this](cellsight::ScannerLineConfig& c, uint32_t) { onReconfigure(c); });
   }
 
  private:
+  static void copyThresholds(const cellsight::LineThresholds& t, cellsight::ScannerLineConfig* c) {
+    c->min_contrast = t.min_contrast;
+    c->threshold_fraction = t.threshold_fraction;
+    c->max_run = t.max_run;
+    c->secondary_peak_ratio = t.secondary_peak_ratio;
+    c->min_segment = t.min_segment;
+    c->segment_max_jump = t.segment_max_jump;
+  }
+
   /// New thresholds from dynamic_reconfigure, checked like config/scanner.yaml; refused ones are
   /// logged and the running values sent back.
   void onReconfigure(cellsight::ScannerLineConfig& c) {
@@ -79,15 +82,9 @@ class Triangulation {
     const auto bad = cellsight::checkLineThresholds(t);
     std::lock_guard<std::mutex> lock(mutex_);
     if (!bad.first.empty()) {
-      const cellsight::LineThresholds cur = cellsight::lineThresholdsOf(line_);
       ROS_ERROR("triangulation: reconfigure refused: %s %s; the running thresholds stay", bad.first.c_str(),
                 bad.second.c_str());
-      c.min_contrast = cur.min_contrast;
-      c.threshold_fraction = cur.threshold_fraction;
-      c.max_run = cur.max_run;
-      c.secondary_peak_ratio = cur.secondary_peak_ratio;
-      c.min_segment = cur.min_segment;
-      c.segment_max_jump = cur.segment_max_jump;
+      copyThresholds(cellsight::lineThresholdsOf(line_), &c);
       return;
     }
     cellsight::applyLineThresholds(t, &line_);

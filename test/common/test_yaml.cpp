@@ -79,3 +79,16 @@ TEST(Calibration, TransformRoundTripAndCorruptFileKeepsOld) {
   const std::string msg = errorOf([&] { cellsight::loadCalibrationFolder(dir); });
   EXPECT_NE(msg.find("bad.yaml: child_frame"), std::string::npos) << msg;
 }
+
+TEST(Calibration, TwoFilesForOneFrameAreRefused) {
+  const std::string dir = cellsight_test::tempDir();
+  cellsight::TransformCalibration c;
+  c.parent_frame = "flange";
+  c.child_frame = "laser";
+  cellsight::saveTransformCalibration(dir + "/laser.yaml", c);
+  EXPECT_EQ(cellsight::loadCalibrationFolder(dir).transforms.size(), 1u);
+  c.parent_frame = "base_link";  // a second file giving the laser another parent
+  cellsight::saveTransformCalibration(dir + "/laser_old.yaml", c);
+  const std::string msg = errorOf([&] { cellsight::loadCalibrationFolder(dir); });
+  EXPECT_NE(msg.find("laser_old.yaml: frame 'laser' is already calibrated in"), std::string::npos) << msg;
+}

@@ -21,7 +21,8 @@ std::string transformCalibrationYaml(const TransformCalibration& cal);
 void saveTransformCalibration(const std::string& path, const TransformCalibration& cal);
 
 /// What a calibration folder holds: every *.yaml is either a transform (has `parent_frame`)
-/// or camera intrinsics (has `camera_matrix`). Throws ConfigError on the first bad file.
+/// or camera intrinsics (has `camera_matrix`). Throws ConfigError on the first bad file, and on
+/// two files calibrating the same child frame (tf would keep one of them silently).
 struct CalibrationSet {
   std::vector<std::pair<std::string, TransformCalibration>> transforms;  ///< (file, value)
   std::vector<std::string> camera_files;
