@@ -2,8 +2,13 @@
 // (and keeps answering); a cluster holding a single view of a part gives a detection, its tf
 // frame and a correct pose; clusters in a frame with no transform are dropped, the node lives on.
 #include <gtest/gtest.h>
+
+#include <map>
 #include <ros/package.h>
 #include <ros/ros.h>
+#include <ros/topic.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <dynamic_reconfigure/Reconfigure.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
@@ -11,7 +16,6 @@
 #include "cellsight/ClusterArray.h"
 #include "cellsight/DetectionArray.h"
 #include "cellsight/LocateObjects.h"
-#include <dynamic_reconfigure/Reconfigure.h>
 #include "cellsight/localization/localization_eval.hpp"
 #include "cellsight/localization/model_matching.hpp"
 #include "cellsight_ros/conversions.hpp"
@@ -121,6 +125,7 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   ASSERT_TRUE(locate.call(srv));
   EXPECT_EQ(srv.response.detections.detections.size(), 1u);
 
+
   // no transform for this frame: dropped (no detections for this stamp), the node keeps serving
   clusters.header.frame_id = "nowhere";
   clusters.header.stamp = ros::Time::now();
@@ -130,6 +135,20 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   ASSERT_TRUE(locate.call(srv));
   EXPECT_EQ(srv.response.status, cellsight::LocateObjects::Response::NO_TRANSFORM);
   EXPECT_NE(srv.response.message.find("no transform"), std::string::npos) << srv.response.message;
+  // diagnostics: the node reports the scans it processed and the one it dropped, with the reason
+  std::map<std::string, std::string> kv;
+  for (int tries = 0; tries < 10 && kv["dropped: no scanner camera transform at the scan's stamp"] != "1"; ++tries) {
+    const auto diag = ros::topic::waitForMessage<diagnostic_msgs::DiagnosticArray>("/diagnostics", nh, ros::Duration(3));
+    ASSERT_TRUE(diag) << "no /diagnostics";
+    for (const auto& st : diag->status) {
+      if (st.name.find("model_matching") == std::string::npos) continue;
+      kv.clear();
+      for (const auto& v : st.values) kv[v.key] = v.value;
+    }
+  }
+  EXPECT_EQ(kv["dropped: no scanner camera transform at the scan's stamp"], "1");
+  ASSERT_FALSE(kv["scans processed"].empty());
+  EXPECT_GE(std::stoi(kv["scans processed"]), 3);
 }
 
 int main(int argc, char** argv) {
