@@ -4,9 +4,12 @@
 #include <pcl/features/normal_3d.h>
 #include <pcl/filters/statistical_outlier_removal.h>
 #include <pcl/io/pcd_io.h>
+#include <pcl/console/print.h>
+#include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/io/ply_io.h>
 #include <pcl/point_types.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <stdexcept>
 
@@ -76,6 +79,25 @@ size_t removeNonFinite(ScanCloud& c) {
   return removed;
 }
 
+double medianPointSpacing(const ScanCloud& cloud, size_t samples) {
+  if (cloud.size() < 2) return 0.0;
+  auto pc = toPclXyzi<pcl::PointXYZI>(cloud);
+  pcl::KdTreeFLANN<pcl::PointXYZI> tree;
+  tree.setInputCloud(pc);
+  const size_t n = std::min(samples, cloud.size());
+  std::vector<double> d;
+  d.reserve(n);
+  std::vector<int> idx(2);
+  std::vector<float> sq(2);
+  for (size_t k = 0; k < n; ++k) {
+    const size_t i = k * cloud.size() / n;
+    if (tree.nearestKSearch((*pc)[i], 2, idx, sq) == 2 && sq[1] > 0) d.push_back(std::sqrt(sq[1]));
+  }
+  if (d.empty()) return 0.0;
+  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
+  return d[d.size() / 2];
+}
+
 void estimateNormals(ScanCloud& cloud, int k, const Eigen::Vector3f& viewpoint) {
   auto pc = toPcl(cloud);
   pcl::NormalEstimation<PointT, pcl::Normal> ne;
@@ -111,6 +133,14 @@ void saveCloud(const std::string& path, const ScanCloud& cloud) {
 ScanCloud loadCloud(const std::string& path) {
   pcl::PointCloud<PointT> pc;
   int rc = -1;
+  // PCL warns for every field a file lacks (intensity, normals): not the user's problem; its
+  // errors still print
+  const pcl::console::VERBOSITY_LEVEL level = pcl::console::getVerbosityLevel();
+  pcl::console::setVerbosityLevel(pcl::console::L_ERROR);
+  struct Restore {
+    pcl::console::VERBOSITY_LEVEL l;
+    ~Restore() { pcl::console::setVerbosityLevel(l); }
+  } restore{level};
   if (path.size() > 4 && path.substr(path.size() - 4) == ".ply") {
     rc = pcl::io::loadPLYFile(path, pc);
   } else if (path.size() > 4 && path.substr(path.size() - 4) == ".pcd") {

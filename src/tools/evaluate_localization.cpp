@@ -38,6 +38,7 @@
 #include <sstream>
 
 #include "cellsight/common/file_io.hpp"
+#include "cellsight/eval/overlay.hpp"
 #include "cellsight/localization/localization_eval.hpp"
 #include "cellsight/common/mesh.hpp"
 #include "cellsight/common/scan_cloud.hpp"
@@ -460,31 +461,10 @@ int runReal(const Options& o) {
   }
   writeJson(o.json, j);
   if (!o.png.empty()) {
-    // pinhole view from the sensor (origin, looking along -z as the UWA scans do; +z otherwise)
-    float zs = 0;
-    for (const auto& p : scene.points) zs += p.z();
-    const float dir = zs < 0 ? -1.f : 1.f;
-    Eigen::AlignedBox2f box;
-    auto proj = [&](const Eigen::Vector3f& p) { return Eigen::Vector2f(p.x() / (dir * p.z()), p.y() / (dir * p.z())); };
-    for (const auto& p : scene.points)
-      if (dir * p.z() > 0) box.extend(proj(p));
-    const int W = 900;
-    const float sx = (W - 20) / std::max(1e-6f, box.sizes().x());
-    const int H = static_cast<int>(box.sizes().y() * sx) + 20;
-    cv::Mat img(H, W, CV_8UC3, cv::Scalar(255, 255, 255));
-    auto pix = [&](const Eigen::Vector3f& p) {
-      const Eigen::Vector2f u = proj(p);
-      return cv::Point(10 + static_cast<int>((u.x() - box.min().x()) * sx), H - 10 - static_cast<int>((u.y() - box.min().y()) * sx));
-    };
-    for (const auto& p : scene.points)
-      if (dir * p.z() > 0) cv::circle(img, pix(p), 1, cv::Scalar(150, 150, 150), -1);
-    if (!dets.empty()) {
-      const ScanCloud placed = sampleMesh(mesh, std::max(0.002, cfg.voxel), 3);
-      const Eigen::Isometry3f T = dets[0].pose.cast<float>();
-      for (const auto& p : placed.points) cv::circle(img, pix(T * p), 1, cv::Scalar(30, 30, 220), -1);
-    }
+    const ScanCloud placed = sampleMesh(mesh, std::max(0.002, cfg.voxel), 3);
+    const Eigen::Isometry3f T = dets.empty() ? Eigen::Isometry3f::Identity() : Eigen::Isometry3f(dets[0].pose.cast<float>());
     std::vector<uchar> buf;
-    cv::imencode(".png", img, buf);
+    cv::imencode(".png", drawDetectionOverlay(scene, placed.points, dets.empty() ? nullptr : &T), buf);
     writeFileAtomic(o.png, std::string(buf.begin(), buf.end()));
   }
   return dets.empty() ? 3 : 0;

@@ -276,6 +276,48 @@ TEST(ModelMatchingRealData, PclMilkCartonInItsKinectScene) {
   EXPECT_LT(e.rotation, 2 * M_PI / 180);
 }
 
+// The same two real cases with no hand-tuned settings: the defaults scaled to the model's size
+// and the scene's resolution (what cellsight_locate uses without --matching).
+TEST(ModelMatchingRealData, ScaledDefaultsFindBunnyAndMilk) {
+  const std::string root = std::string(CELLSIGHT_SOURCE_DIR) + "/../shared/data/pointclouds";
+  if (!std::ifstream(root + "/pcl/milk.pcd") || !std::ifstream(root + "/stanford_bunny/bun045.ply"))
+    GTEST_SKIP() << "real data not found at " << root;
+  struct Case {
+    std::string model, scene;
+    Eigen::Vector3f sensor;
+    Eigen::Isometry3d truth;
+    double max_t, max_r_deg;
+  };
+  std::ifstream tf(root + "/stanford_bunny/T_bun045_to_bun000.txt");
+  Eigen::Matrix4d M;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) tf >> M(r, c);
+  const std::vector<Case> cases = {
+      {root + "/stanford_bunny/bun045.ply", root + "/stanford_bunny/bun000.ply", Eigen::Vector3f(0, 0, 1),
+       Eigen::Isometry3d(M), 2e-3, 1.0},
+      {root + "/pcl/milk.pcd", root + "/pcl/milk_cartoon_all_small_clorox.pcd", Eigen::Vector3f::Zero(),
+       Eigen::Isometry3d::Identity(), 5e-3, 2.0}};
+  for (const Case& c : cases) {
+    auto lib = std::make_shared<ModelLibrary>();
+    lib->addCloudModel("m", loadCloud(c.model), c.sensor);
+    const ScanCloud scene = loadCloud(c.scene);
+    const double diagonal = lib->model("m").bounds.diagonal().norm();
+    MatchingConfig cfg = scaledMatchingConfig(MatchingConfig(), diagonal, medianPointSpacing(scene));
+    cfg.viewpoint = c.sensor;
+    cfg.min_coverage = 0;
+    cfg.max_instances = 1;
+    ModelMatcher m(lib, cfg);
+    MatchStats st;
+    const auto d = m.locate({scene}, {}, &st);
+    ASSERT_EQ(d.size(), 1u) << c.model;
+    const PoseError e = poseError(lib->model("m").info, m.centroid("m"), d[0].pose, c.truth);
+    std::printf("%s, scaled defaults (voxel %.1f mm): %.3f mm %.3f deg, fitness %.2f\n", c.model.c_str(), cfg.voxel * 1e3,
+                e.translation * 1e3, e.rotation * 180 / M_PI, d[0].fitness);
+    EXPECT_LT(e.translation, c.max_t) << c.model;
+    EXPECT_LT(e.rotation, c.max_r_deg * M_PI / 180) << c.model;
+  }
+}
+
 // A scanner loses a little at every edge (segment ends, the last line before an edge), so a
 // flat top's scanned patch is smaller than the face and slides inside it; ICP stops where the
 // first points reach an edge. Centring in the slack puts the pose in the middle: with the same

@@ -26,6 +26,10 @@ ScanCloud statisticalOutlierRemoval(const ScanCloud& in, int k = 20, double std_
 ScanCloud cropBox(const ScanCloud& in, const Eigen::AlignedBox3f& box);
 /// Normals from k neighbours, oriented towards `viewpoint` (e.g. the camera centre).
 void estimateNormals(ScanCloud& cloud, int k, const Eigen::Vector3f& viewpoint);
+
+/// Median distance from a point to its nearest neighbour, over up to `samples` points spread
+/// evenly through the cloud (the scan's resolution); 0 for fewer than 2 points.
+double medianPointSpacing(const ScanCloud& cloud, size_t samples = 2000);
 /// Removes non-finite points; returns how many were removed.
 size_t removeNonFinite(ScanCloud& cloud);
 

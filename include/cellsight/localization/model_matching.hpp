@@ -188,4 +188,10 @@ class ModelMatcher {
 /// Strict loader of config/matching.yaml (ConfigError names file and key).
 MatchingConfig loadMatchingConfig(const std::string& path);
 
+/// Settings for a part of any size, from `base` (tuned on the demo parts: 2 mm voxel for parts
+/// of 8-12 cm): the voxel becomes max(model diagonal / 50, 2 x the scene's point spacing) and every
+/// length setting (radii, steps, distances, tolerances, RMSE) scales with it; shares and counts
+/// stay. Used by cellsight_locate when no settings file is given.
+MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_diagonal, double scene_spacing);
+
 }  // namespace cellsight

@@ -1,4 +1,8 @@
 // Strict loader of config/matching.yaml into a MatchingConfig.
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
 #include "cellsight/common/errors.hpp"
 #include "cellsight/common/yaml_reader.hpp"
 #include "cellsight/localization/model_matching.hpp"
@@ -23,6 +27,18 @@ void ModelMatcher::setAcceptance(const AcceptanceThresholds& t) {
   config_.min_coverage = t.min_coverage;
   config_.max_rmse = t.max_rmse;
   config_.max_instances = t.max_instances;
+}
+
+MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_diagonal, double scene_spacing) {
+  if (!(model_diagonal > 0) || !std::isfinite(model_diagonal)) throw std::invalid_argument("model diagonal must be > 0");
+  const double voxel = std::max(model_diagonal / 50.0, std::isfinite(scene_spacing) ? 2.0 * scene_spacing : 0.0);
+  const double r = voxel / base.voxel;
+  MatchingConfig c = base;
+  for (double* v : {&c.voxel, &c.normal_radius, &c.feature_radius, &c.ppf_sampling, &c.ppf_distance_step,
+                    &c.inlier_distance, &c.icp_spacing, &c.icp_huber_floor, &c.icp_slack_range, &c.icp_slack_tolerance,
+                    &c.fitness_radius, &c.max_rmse, &c.max_support_penetration})
+    *v *= r;
+  return c;
 }
 
 MatchingConfig loadMatchingConfig(const std::string& path) {
