@@ -1,14 +1,19 @@
-// Peer benchmark for localisation (issue 4, item 5): the same single-view clouds of our parts,
-// in one run, through ours (PPF + distance-field scoring + ICP; and the thesis's FPFH RANSAC),
-// PCL SampleConsensusPrerejective on FPFH, Open3D 0.16 RANSAC and FGR on FPFH, and OpenCV
-// contrib's PPF (ppf_match_3d). Each method runs in its own child process (peak memory from
-// wait4). Ours also runs with PCL's normal estimation / FLANN and Embree's point query in place
-// of its own grids (the library paths, for comparison). Scene preprocessing (voxels, normals, features) is inside each method's timed part;
-// model preprocessing (training, model features) is not. Peers that stop at a coarse pose get
-// PCL's ICP (point to point, 30 iterations), as a user gluing libraries would add.
+// Peer benchmark for localisation: the same single-view clouds of our parts, in one run, through
+// ours (PPF + distance-field scoring + ICP; and the thesis's FPFH RANSAC), PCL
+// SampleConsensusPrerejective on FPFH, Open3D 0.16 RANSAC and FGR on FPFH, and OpenCV contrib's
+// PPF (ppf_match_3d). Each method runs in its own child process (peak memory from wait4). Ours
+// also runs with PCL's normal estimation / FLANN and Embree's point query in place of its own
+// grids (the library paths). Scene preprocessing (voxels, normals, features) is inside each
+// method's timed part; model preprocessing (training, model features) is not. Peers that stop at
+// a coarse pose get PCL's ICP (point to point, 30 iterations), as a user gluing libraries would.
+// Fairness: every FPFH peer runs at three scales of its voxel / normal / feature / inlier sizes
+// (0.75x, 1x, 1.5x of 2 / 5 / 10 / 3 mm) and its best one is compared; a case a method throws on
+// or gets wrong is a failure, never a time; speed is compared per case only where both methods
+// succeed, and a speed ratio is claimed only against a peer that succeeds on >= 90 % of the cases.
 // Each scene runs 3 times and counts its fastest run (success from the first).
-// Output: JSON (argv[1], default bench_localization.json) + a Markdown table on stdout.
+// Output: JSON (argv[1], default bench_localization.json) + Markdown tables on stdout.
 // argv[2]: clouds per part (default 8); argv[3]: run only the methods whose name contains it.
+#include <pcl/console/print.h>
 #include <pcl/features/fpfh.h>
 #include <pcl/features/normal_3d.h>
 #include <pcl/filters/voxel_grid.h>
@@ -47,7 +52,13 @@ const std::string kRoot = CELLSIGHT_SOURCE_DIR;
 const Eigen::Vector3f kEye(0.52f, 0.f, 0.62f);
 const unsigned kMethodLimitSeconds = 600;
 const int kRepetitions = 3;  // runs per scene; the fastest is the scene's time
-const double kVoxel = 0.002, kNormal = 0.005, kFeature = 0.01, kInlier = 0.003;
+/// The sizes an FPFH peer is tuned by; scaled together by the sweep.
+struct Tuning {
+  double voxel = 0.002, normal = 0.005, feature = 0.01, inlier = 0.003;
+  Tuning scaled(double f) const { return {voxel * f, normal * f, feature * f, inlier * f}; }
+};
+const Tuning kDefault;
+const double kVoxel = kDefault.voxel;
 
 struct Case {
   std::string model;
@@ -84,23 +95,23 @@ pcl::PointCloud<PN>::Ptr toPn(const ScanCloud& c) {
   return p;
 }
 
-/// The scene as every FPFH peer prepares it: 2 mm voxels, normals (5 mm) to the camera, FPFH (10 mm).
+/// The scene as every FPFH peer prepares it: voxels, normals to the camera, FPFH (by `t`).
 struct PreparedScene {
   pcl::PointCloud<PN>::Ptr pts;
   pcl::PointCloud<pcl::FPFHSignature33>::Ptr fpfh;
 };
 
-PreparedScene prepare(const ScanCloud& scene) {
+PreparedScene prepare(const ScanCloud& scene, const Tuning& t = kDefault) {
   pcl::PointCloud<pcl::PointXYZ>::Ptr all(new pcl::PointCloud<pcl::PointXYZ>), down(new pcl::PointCloud<pcl::PointXYZ>);
   for (const auto& p : scene.points) all->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
   pcl::VoxelGrid<pcl::PointXYZ> vg;
   vg.setInputCloud(all);
-  vg.setLeafSize(kVoxel, kVoxel, kVoxel);
+  vg.setLeafSize(static_cast<float>(t.voxel), static_cast<float>(t.voxel), static_cast<float>(t.voxel));
   vg.filter(*down);
   pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
   ne.setInputCloud(down);
   ne.setSearchSurface(all);
-  ne.setRadiusSearch(kNormal);
+  ne.setRadiusSearch(t.normal);
   ne.setViewPoint(kEye.x(), kEye.y(), kEye.z());
   pcl::PointCloud<pcl::Normal>::Ptr n(new pcl::PointCloud<pcl::Normal>);
   ne.compute(*n);
@@ -120,7 +131,7 @@ PreparedScene prepare(const ScanCloud& scene) {
   pcl::FPFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::FPFHSignature33> fe;
   fe.setInputCloud(kept);
   fe.setInputNormals(kn);
-  fe.setRadiusSearch(kFeature);
+  fe.setRadiusSearch(t.feature);
   s.fpfh.reset(new pcl::PointCloud<pcl::FPFHSignature33>);
   fe.compute(*s.fpfh);
   return s;
@@ -133,11 +144,11 @@ struct Model {
   std::vector<Eigen::Vector3f> xyz;
 };
 
-Model modelOf(const ModelLibrary& lib, const std::string& id) {
+Model modelOf(const ModelLibrary& lib, const std::string& id, const Tuning& t) {
   Model m;
-  const auto c = lib.cloud(id, kVoxel);
+  const auto c = lib.cloud(id, t.voxel);
   m.pts = toPn(*c);
-  m.feats = *lib.descriptors(id, kVoxel, kFeature);
+  m.feats = *lib.descriptors(id, t.voxel, t.feature);
   m.fpfh.reset(new pcl::PointCloud<pcl::FPFHSignature33>);
   for (const auto& f : m.feats) {
     pcl::FPFHSignature33 s;
@@ -148,13 +159,13 @@ Model modelOf(const ModelLibrary& lib, const std::string& id) {
   return m;
 }
 
-std::shared_ptr<const std::map<std::string, Model>> allModels(const ModelLibrary& lib) {
+std::shared_ptr<const std::map<std::string, Model>> allModels(const ModelLibrary& lib, const Tuning& t) {
   auto models = std::make_shared<std::map<std::string, Model>>();
-  for (const auto& id : lib.ids()) (*models)[id] = modelOf(lib, id);
+  for (const auto& id : lib.ids()) (*models)[id] = modelOf(lib, id, t);
   return models;
 }
 
-Eigen::Isometry3d pclIcp(const Model& m, const ScanCloud& scene, const Eigen::Isometry3d& T0) {
+Eigen::Isometry3d pclIcp(const Model& m, const ScanCloud& scene, const Eigen::Isometry3d& T0, double inlier) {
   pcl::PointCloud<pcl::PointXYZ>::Ptr src(new pcl::PointCloud<pcl::PointXYZ>), dst(new pcl::PointCloud<pcl::PointXYZ>), out(new pcl::PointCloud<pcl::PointXYZ>);
   for (const auto& p : m.pts->points) src->push_back(pcl::PointXYZ(p.x, p.y, p.z));
   for (const auto& p : scene.points) dst->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
@@ -162,7 +173,7 @@ Eigen::Isometry3d pclIcp(const Model& m, const ScanCloud& scene, const Eigen::Is
   icp.setInputSource(src);
   icp.setInputTarget(dst);
   icp.setMaximumIterations(30);
-  icp.setMaxCorrespondenceDistance(kInlier);
+  icp.setMaxCorrespondenceDistance(inlier);
   icp.align(*out, T0.matrix().cast<float>());
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.matrix() = icp.getFinalTransformation().cast<double>();
@@ -193,37 +204,66 @@ cv::Mat toCvMat(const ScanCloud& c) {
 
 using Method = std::function<std::function<Eigen::Isometry3d(const Case&)>(const std::shared_ptr<const ModelLibrary>&)>;
 
+double median(std::vector<double> v) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+/// Per case: success (2 mm / 2 deg), whether the method threw, and the fastest of the runs (a
+/// time only where it succeeded); the median time over its successes.
 json runMethod(const std::string& name, const Method& make, const std::vector<Case>& cases,
                const std::shared_ptr<const ModelLibrary>& lib) {
   auto locate = make(lib);  // model preparation: not timed
   ModelMatcher centroids(lib, MatchingConfig());
-  int ok = 0;
-  std::vector<double> secs;
+  int ok = 0, threw = 0;
+  json per_case = json::array();
+  std::vector<double> ok_secs;
   for (const auto& c : cases) {
     // each scene kRepetitions times, its fastest run counted: this VM's speed drifts by tens of
     // per cent over minutes, and the methods run one after another
     Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
     double best = 1e9;
-    for (int r = 0; r < kRepetitions; ++r) {
+    bool failed = false;
+    std::string error;
+    for (int r = 0; r < kRepetitions && !failed; ++r) {
       const auto t0 = Clock::now();
-      const Eigen::Isometry3d Tr = locate(c);
+      try {
+        const Eigen::Isometry3d Tr = locate(c);
+        if (r == 0) T = Tr;
+      } catch (const std::exception& e) {  // a throw is a failure, never a (fast) time
+        failed = true;
+        error = e.what();
+      }
       best = std::min(best, std::chrono::duration<double>(Clock::now() - t0).count());
-      if (r == 0) T = Tr;
     }
-    secs.push_back(best);
-    const PoseError e = poseError(lib->model(c.model).info, centroids.centroid(c.model), T, c.truth);
-    ok += e.translation <= 2e-3 && e.rotation <= 2 * M_PI / 180;
+    bool success = false;
+    if (!failed) {
+      const PoseError e = poseError(lib->model(c.model).info, centroids.centroid(c.model), T, c.truth);
+      success = e.translation <= 2e-3 && e.rotation <= 2 * M_PI / 180;
+    }
+    ok += success;
+    threw += failed;
+    if (success) ok_secs.push_back(best);
+    json jc = {{"model", c.model}, {"success", success}, {"threw", failed}};
+    if (success) jc["seconds"] = best;
+    if (failed) jc["error"] = error;
+    per_case.push_back(jc);
   }
-  std::vector<double> s = secs;
-  std::sort(s.begin(), s.end());
-  return {{"method", name}, {"success_percent", 100.0 * ok / cases.size()}, {"median_seconds", s[s.size() / 2]},
-          {"total_seconds", std::accumulate(s.begin(), s.end(), 0.0)}, {"scenes", cases.size()},
-          {"repetitions_per_scene", kRepetitions}};
+  return {{"method", name},
+          {"success_percent", 100.0 * ok / cases.size()},
+          {"threw", threw},
+          {"median_seconds_successful", ok_secs.empty() ? json(nullptr) : json(median(ok_secs))},
+          {"scenes", cases.size()},
+          {"repetitions_per_scene", kRepetitions},
+          {"cases", per_case}};
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
+  // the peers' own failure messages (ICP without correspondences, ...) are counted, not printed
+  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
   const std::string out_path = argc > 1 ? argv[1] : "bench_localization.json";
   const int per_part = argc > 2 ? std::atoi(argv[2]) : 8;
   auto lib = std::make_shared<const ModelLibrary>(kRoot + "/config/models");
@@ -251,53 +291,55 @@ int main(int argc, char** argv) {
   methods.push_back({"cellsight ppf (ours)", ours("ppf")});
   methods.push_back({"cellsight ppf, library searches (PCL normals + FLANN, Embree point query)", ours("ppf", true)});
   methods.push_back({"cellsight fpfh-ransac (thesis method, ours)", ours("ransac")});
-  methods.push_back({"PCL SampleConsensusPrerejective + ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
-                       const auto models = allModels(*l);
-                       return std::function<Eigen::Isometry3d(const Case&)>([models](const Case& c) {
-                         const Model& m = models->at(c.model);
-                         const PreparedScene s = prepare(c.cloud);
-                         pcl::SampleConsensusPrerejective<PN, PN, pcl::FPFHSignature33> r;
-                         r.setInputSource(m.pts);
-                         r.setSourceFeatures(m.fpfh);
-                         r.setInputTarget(s.pts);
-                         r.setTargetFeatures(s.fpfh);
-                         r.setMaximumIterations(50000);
-                         r.setNumberOfSamples(3);
-                         r.setCorrespondenceRandomness(5);
-                         r.setSimilarityThreshold(0.9f);
-                         r.setMaxCorrespondenceDistance(kInlier);
-                         r.setInlierFraction(0.25f);  // a single view shows about a third of a part
-                         pcl::PointCloud<PN> aligned;
-                         r.align(aligned);
-                         Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-                         T.matrix() = r.getFinalTransformation().cast<double>();
-                         return pclIcp(m, c.cloud, T);
-                       });
-                     }});
-  methods.push_back({"Open3D RANSAC (FPFH) + ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
-                       const auto models = allModels(*l);
-                       return std::function<Eigen::Isometry3d(const Case&)>([models](const Case& c) {
-                         const Model& m = models->at(c.model);
-                         const PreparedScene s = prepare(c.cloud);
-                         Open3dRansacOptions o;
-                         o.max_correspondence_distance = kInlier;
-                         return pclIcp(m, c.cloud, open3dRansac(m.xyz, m.feats, xyzOf(s), featsOf(s), o));
-                       });
-                     }});
-  methods.push_back({"Open3D FGR (FPFH) + ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
-                       const auto models = allModels(*l);
-                       return std::function<Eigen::Isometry3d(const Case&)>([models](const Case& c) {
-                         const Model& m = models->at(c.model);
-                         const PreparedScene s = prepare(c.cloud);
-                         FgrOptions o;
-                         o.max_correspondence_distance = kInlier;
-                         try {
-                           return pclIcp(m, c.cloud, fastGlobalRegistration(m.xyz, m.feats, xyzOf(s), featsOf(s), o));
-                         } catch (const std::exception&) {  // Open3D throws when too few matches survive its tuple test
-                           return Eigen::Isometry3d::Identity();
-                         }
-                       });
-                     }});
+  for (const double f : {0.75, 1.0, 1.5}) {
+    const Tuning t = kDefault.scaled(f);
+    char tag[64];
+    std::snprintf(tag, sizeof(tag), " [voxel %.1f mm]", t.voxel * 1e3);
+    methods.push_back({std::string("PCL SampleConsensusPrerejective + ICP") + tag, [t](const std::shared_ptr<const ModelLibrary>& l) {
+                         const auto models = allModels(*l, t);
+                         return std::function<Eigen::Isometry3d(const Case&)>([models, t](const Case& c) {
+                           const Model& m = models->at(c.model);
+                           const PreparedScene s = prepare(c.cloud, t);
+                           pcl::SampleConsensusPrerejective<PN, PN, pcl::FPFHSignature33> r;
+                           r.setInputSource(m.pts);
+                           r.setSourceFeatures(m.fpfh);
+                           r.setInputTarget(s.pts);
+                           r.setTargetFeatures(s.fpfh);
+                           r.setMaximumIterations(50000);
+                           r.setNumberOfSamples(3);
+                           r.setCorrespondenceRandomness(5);
+                           r.setSimilarityThreshold(0.9f);
+                           r.setMaxCorrespondenceDistance(t.inlier);
+                           r.setInlierFraction(0.25f);  // a single view shows about a third of a part
+                           pcl::PointCloud<PN> aligned;
+                           r.align(aligned);
+                           Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+                           T.matrix() = r.getFinalTransformation().cast<double>();
+                           return pclIcp(m, c.cloud, T, t.inlier);
+                         });
+                       }});
+    methods.push_back({std::string("Open3D RANSAC (FPFH) + ICP") + tag, [t](const std::shared_ptr<const ModelLibrary>& l) {
+                         const auto models = allModels(*l, t);
+                         return std::function<Eigen::Isometry3d(const Case&)>([models, t](const Case& c) {
+                           const Model& m = models->at(c.model);
+                           const PreparedScene s = prepare(c.cloud, t);
+                           Open3dRansacOptions o;
+                           o.max_correspondence_distance = t.inlier;
+                           return pclIcp(m, c.cloud, open3dRansac(m.xyz, m.feats, xyzOf(s), featsOf(s), o), t.inlier);
+                         });
+                       }});
+    // Open3D's FGR throws when too few matches survive its tuple test: a failure (runMethod)
+    methods.push_back({std::string("Open3D FGR (FPFH) + ICP") + tag, [t](const std::shared_ptr<const ModelLibrary>& l) {
+                         const auto models = allModels(*l, t);
+                         return std::function<Eigen::Isometry3d(const Case&)>([models, t](const Case& c) {
+                           const Model& m = models->at(c.model);
+                           const PreparedScene s = prepare(c.cloud, t);
+                           FgrOptions o;
+                           o.max_correspondence_distance = t.inlier;
+                           return pclIcp(m, c.cloud, fastGlobalRegistration(m.xyz, m.feats, xyzOf(s), featsOf(s), o), t.inlier);
+                         });
+                       }});
+  }
   methods.push_back({"OpenCV ppf_match_3d + its ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
                        auto det = std::make_shared<std::map<std::string, std::shared_ptr<cv::ppf_match_3d::PPF3DDetector>>>();
                        auto mats = std::make_shared<std::map<std::string, cv::Mat>>();
@@ -330,7 +372,7 @@ int main(int argc, char** argv) {
                      }});
 
   json all = json::array();
-  std::printf("| method | success (2 mm / 2°) | median s/scene | peak RSS MB |\n|---|---|---|---|\n");
+  std::printf("| method | success (2 mm / 2°) | threw | median s/scene (successes) | peak RSS MB |\n|---|---|---|---|---|\n");
   const std::string only = argc > 3 ? argv[3] : "";  // run only the methods whose name contains this
   for (const auto& [name, make] : methods) {
     if (!only.empty() && name.find(only) == std::string::npos) continue;
@@ -365,13 +407,57 @@ int main(int argc, char** argv) {
     r["peak_rss_mb"] = ru.ru_maxrss / 1024.0;
     all.push_back(r);
     if (r.contains("error")) {
-      std::printf("| %s | error: %s | | %.0f |\n", name.c_str(), r["error"].get<std::string>().c_str(), r["peak_rss_mb"].get<double>());
+      std::printf("| %s | error: %s | | | %.0f |\n", name.c_str(), r["error"].get<std::string>().c_str(), r["peak_rss_mb"].get<double>());
     } else {
-      std::printf("| %s | %.1f %% | %.4f | %.0f |\n", name.c_str(), r["success_percent"].get<double>(),
-                  r["median_seconds"].get<double>(), r["peak_rss_mb"].get<double>());
+      const json& ms = r["median_seconds_successful"];
+      std::printf("| %s | %.1f %% | %d | %s | %.0f |\n", name.c_str(), r["success_percent"].get<double>(),
+                  r["threw"].get<int>(), ms.is_null() ? "-" : std::to_string(ms.get<double>()).c_str(),
+                  r["peak_rss_mb"].get<double>());
     }
     std::fflush(stdout);
   }
-  std::ofstream(out_path) << json({{"scenes", cases.size()}, {"results", all}}).dump(2) << "\n";
+  // Speed against each peer: its best tuning (most successes, then fastest), and per case only
+  // where both succeed; a ratio is claimed only against a peer that succeeds on >= 90 % of them.
+  json comparisons = json::array();
+  const json* ours_r = nullptr;
+  for (const auto& r : all)
+    if (r["method"] == "cellsight ppf (ours)" && r.contains("cases")) ours_r = &r;
+  if (ours_r) {
+    std::map<std::string, const json*> best;
+    for (const auto& r : all) {
+      if (!r.contains("cases") || r["method"].get<std::string>().rfind("cellsight", 0) == 0) continue;
+      std::string peer = r["method"];
+      peer = peer.substr(0, peer.find(" ["));
+      const json*& b = best[peer];
+      auto better = [](const json& a, const json& c) {
+        if (a["success_percent"] != c["success_percent"]) return a["success_percent"] > c["success_percent"];
+        const json &x = a["median_seconds_successful"], &y = c["median_seconds_successful"];
+        return !x.is_null() && (y.is_null() || x.get<double>() < y.get<double>());
+      };
+      if (!b || better(r, *b)) b = &r;
+    }
+    std::printf("\n| peer (best tuning) | its success | both succeed | median time ratio peer / ours | claim |\n|---|---|---|---|---|\n");
+    for (const auto& [peer, r] : best) {
+      std::vector<double> ratios;
+      for (size_t i = 0; i < (*r)["cases"].size(); ++i) {
+        const json &a = (*ours_r)["cases"][i], &b = (*r)["cases"][i];
+        if (a["success"].get<bool>() && b["success"].get<bool>())
+          ratios.push_back(b["seconds"].get<double>() / a["seconds"].get<double>());
+      }
+      const double success = (*r)["success_percent"];
+      const bool claim = success >= 90.0 && !ratios.empty();
+      const double ratio = median(ratios);
+      comparisons.push_back({{"peer", peer},
+                             {"tuning", (*r)["method"]},
+                             {"peer_success_percent", success},
+                             {"cases_both_succeed", ratios.size()},
+                             {"median_time_ratio_peer_over_ours", ratios.empty() ? json(nullptr) : json(ratio)},
+                             {"speed_claim", claim}});
+      std::printf("| %s | %.1f %% | %zu | %s | %s |\n", (*r)["method"].get<std::string>().c_str(), success, ratios.size(),
+                  ratios.empty() ? "-" : std::to_string(ratio).c_str(),
+                  claim ? "yes" : "no (peer under 90 % success)");
+    }
+  }
+  std::ofstream(out_path) << json({{"scenes", cases.size()}, {"results", all}, {"comparisons", comparisons}}).dump(2) << "\n";
   return 0;
 }
