@@ -17,6 +17,7 @@
 #include "cellsight/scanner/scanner_config.hpp"
 #include "cellsight/sim/scene.hpp"
 #include "cellsight/common/trajectory.hpp"
+#include "cellsight/common/file_io.hpp"
 #include "cellsight/common/yaml_reader.hpp"
 #include "cli_args.hpp"
 
@@ -71,6 +72,18 @@ std::string validateFile(const std::string& f) {
   if (node.IsMap() && (node["line"] || node["triangulation"] || node["outlier_k"])) {
     cellsight::loadScannerSettings(f);
     return "scanner settings";
+  }
+  if (node.IsMap() && node["seeds"]) {  // the held-out seeds of random cells
+    cellsight::YamlMap m(node, f);
+    const std::string base = cellsight::resolveRelative(f, m.getString("base"));
+    cellsight::loadScene(base);
+    std::vector<int> seeds;
+    for (const auto& s : m.raw("seeds")) seeds.push_back(s.as<int>());
+    std::sort(seeds.begin(), seeds.end());
+    if (seeds.empty() || std::adjacent_find(seeds.begin(), seeds.end()) != seeds.end())
+      m.fail("seeds", "must be a non-empty list of distinct integers");
+    m.finish();
+    return std::to_string(seeds.size()) + " held-out seeds on " + base;
   }
   if (f.size() >= 10 && f.substr(f.size() - 10) == "model.yaml") {
     return "model '" + cellsight::loadModelInfo(f).id + "'";
