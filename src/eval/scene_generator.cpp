@@ -123,14 +123,15 @@ std::vector<Eigen::Matrix3d> stableRestRotations(const TriangleMesh& mesh) {
       if (n.dot(v.cast<double>()) > extreme - 1e-5) support.push_back((R * v.cast<double>()).head<2>());
     const std::vector<Vec2> hull = convexHull(support);
     if (!insideBy(hull, (R * centroid).head<2>(), 1e-3)) continue;
-    // the mesh's own standing side first, then by area
-    const double priority = (n.z() < -0.999 ? 1e9 : 0) + side.second;
+    const double priority = side.second;  // larger sides first
     found.emplace_back(priority, R);
   }
   std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
-  std::vector<Eigen::Matrix3d> out;
-  for (const auto& f : found) out.push_back(f.second);
-  if (out.empty()) out.push_back(Eigen::Matrix3d::Identity());  // e.g. a sphere: as modelled
+  // the part as modelled stands on its z-min (the scenes' convention): always the first rest, even
+  // when that side is not one flat face (a blade's curved underside, a sphere)
+  std::vector<Eigen::Matrix3d> out{Eigen::Matrix3d::Identity()};
+  for (const auto& f : found)
+    if (!f.second.isIdentity(1e-6)) out.push_back(f.second);
   return out;
 }
 

@@ -38,7 +38,13 @@
 #include <sstream>
 
 #include "cellsight/common/file_io.hpp"
+#include "cellsight/common/yaml_reader.hpp"
 #include "cellsight/eval/overlay.hpp"
+#include "cellsight/common/trajectory.hpp"
+#include "cellsight/scanner/scanner_config.hpp"
+#include "cellsight/localization/clustering.hpp"
+#include "cellsight/eval/sim_scan.hpp"
+#include "cellsight/eval/scene_generator.hpp"
 #include "cellsight/localization/localization_eval.hpp"
 #include "cellsight/common/mesh.hpp"
 #include "cellsight/common/scan_cloud.hpp"
@@ -344,6 +350,73 @@ int runOutliers(const Options& o) {
                "outliers: success rate per part", "outliers, % of the part's points");
 }
 
+struct ScoredDetection {
+  std::string model;
+  Eigen::Isometry3d pose;
+  double fitness = 0, coverage = 0, rmse = 0;
+};
+
+/// Detections against a scene's truth: each object takes the nearest unused detection of its
+/// model, found when within max_t / max_r; detections left over are false. Per part and totals.
+json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMatcher& centroids,
+                     const std::vector<ScoredDetection>& dets, double max_t, double max_r, DetectionCounts* counts,
+                     std::vector<double>* terr, std::vector<double>* rerr) {
+  json out;
+  out["success"] = {{"max_t_mm", max_t * 1e3}, {"max_r_deg", max_r / kDeg}};
+  out["parts"] = json::array();
+  std::vector<bool> used(dets.size(), false);
+  for (const auto& o : scene.objects) {
+    json p = {{"name", o.name}, {"model", o.model}, {"found", false}};
+    if (!lib.has(o.model)) {  // a distractor: nothing to find, only false detections to avoid
+      p["distractor"] = true;
+      out["parts"].push_back(p);
+      continue;
+    }
+    double best = 1e9;
+    int bi = -1;
+    PoseError be;
+    const Eigen::Vector3d c = centroids.centroid(o.model);
+    for (size_t i = 0; i < dets.size(); ++i) {
+      if (used[i] || dets[i].model != o.model) continue;
+      const PoseError e = poseError(lib.model(o.model).info, c, dets[i].pose, o.T_base_object);
+      if (e.translation < best) {
+        best = e.translation;
+        bi = static_cast<int>(i);
+        be = e;
+      }
+    }
+    if (bi >= 0 && be.translation <= max_t && be.rotation <= max_r) {
+      used[bi] = true;
+      p["found"] = true;
+      p["t_err_mm"] = be.translation * 1e3;
+      p["r_err_deg"] = be.rotation / kDeg;
+      p["fitness"] = dets[bi].fitness;
+      p["coverage"] = dets[bi].coverage;
+      p["rmse_mm"] = dets[bi].rmse * 1e3;
+      terr->push_back(be.translation * 1e3);
+      rerr->push_back(be.rotation / kDeg);
+      ++counts->tp;
+    } else {
+      ++counts->fn;
+      if (bi >= 0) {
+        p["nearest_t_err_mm"] = be.translation * 1e3;
+        p["nearest_r_err_deg"] = be.rotation / kDeg;
+      }
+    }
+    out["parts"].push_back(p);
+  }
+  for (bool u : used) counts->fp += !u;
+  out["tp"] = counts->tp;
+  out["fp"] = counts->fp;
+  out["fn"] = counts->fn;
+  out["precision"] = counts->precision();
+  out["recall"] = counts->recall();
+  out["f1"] = counts->f1();
+  out["median_t_err_mm"] = median(*terr);
+  out["median_r_err_deg"] = median(*rerr);
+  return out;
+}
+
 Eigen::Isometry3d poseOf(const json& d) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.translation() = Eigen::Vector3d(d.at("xyz")[0], d.at("xyz")[1], d.at("xyz")[2]);
@@ -363,65 +436,86 @@ int runDemo(const Options& o) {
   } catch (const std::exception& e) {
     throw std::runtime_error(o.detections + ": not valid JSON: " + e.what());
   }
+  std::vector<ScoredDetection> dets;
+  for (const json& d : raw["detections"])
+    dets.push_back({d.at("model"), poseOf(d), d.at("fitness"), d.at("coverage"), d.at("rmse").get<double>()});
   // "found": the right model within 5 mm / 5° (a gross-error test); the errors are reported as measured
-  const double max_t = o.max_t_mm * 1e-3, max_r = o.max_r_deg * kDeg;
-  json out;
-  out["locate_seconds"] = raw.value("locate_seconds", 0.0);
-  out["success"] = {{"max_t_mm", max_t * 1e3}, {"max_r_deg", max_r / kDeg}};
-  std::vector<bool> used(raw["detections"].size(), false);
   DetectionCounts counts;
   std::vector<double> terr, rerr;
-  for (const auto& o : scene.objects) {
-    json p = {{"name", o.name}, {"model", o.model}, {"found", false}};
-    double best = 1e9;
-    int bi = -1;
-    PoseError be;
-    const Eigen::Vector3d c = centroids.centroid(o.model);
-    for (size_t i = 0; i < raw["detections"].size(); ++i) {
-      const json& d = raw["detections"][i];
-      if (used[i] || d.at("model") != o.model) continue;
-      const PoseError e = poseError(lib->model(o.model).info, c, poseOf(d), o.T_base_object);
-      if (e.translation < best) {
-        best = e.translation;
-        bi = static_cast<int>(i);
-        be = e;
-      }
-    }
-    if (bi >= 0 && be.translation <= max_t && be.rotation <= max_r) {
-      used[bi] = true;
-      const json& d = raw["detections"][bi];
-      p["found"] = true;
-      p["t_err_mm"] = be.translation * 1e3;
-      p["r_err_deg"] = be.rotation / kDeg;
-      p["fitness"] = d.at("fitness");
-      p["coverage"] = d.at("coverage");
-      p["rmse_mm"] = d.at("rmse").get<double>() * 1e3;
-      p["locate_seconds"] = raw.value("locate_seconds", 0.0);
-      terr.push_back(be.translation * 1e3);
-      rerr.push_back(be.rotation / kDeg);
-      ++counts.tp;
-    } else {
-      ++counts.fn;
-      if (bi >= 0) {
-        p["nearest_t_err_mm"] = be.translation * 1e3;
-        p["nearest_r_err_deg"] = be.rotation / kDeg;
-      }
-    }
-    out["parts"].push_back(p);
-  }
-  for (bool u : used) counts.fp += !u;
-  out["tp"] = counts.tp;
-  out["fp"] = counts.fp;
-  out["fn"] = counts.fn;
-  out["precision"] = counts.precision();
-  out["recall"] = counts.recall();
-  out["f1"] = counts.f1();
-  out["median_t_err_mm"] = median(terr);
-  out["median_r_err_deg"] = median(rerr);
+  json out = scoreDetections(scene, *lib, centroids, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, &counts, &terr, &rerr);
+  out["locate_seconds"] = raw.value("locate_seconds", 0.0);
+  for (auto& p : out["parts"])
+    if (p["found"].get<bool>()) p["locate_seconds"] = out["locate_seconds"];
   writeJson(o.json, out);
   std::printf("demo: %d/%zu parts found, %d false, median %.3f mm %.3f deg, locate %.3f s\n", counts.tp, scene.objects.size(),
               counts.fp, median(terr), median(rerr), out["locate_seconds"].get<double>());
   return counts.fn == 0 && counts.fp == 0 ? 0 : 3;
+}
+
+/// Random cells (eval/scene_generator) scanned in-process with the demo sweep and the nodes' crop
+/// and outlier filter, clustered and located: detection P/R/F1 and errors over the seeds.
+int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::string& out_dir) {
+  const std::string models = o.orRoot(o.models, "config/models"), base = o.orRoot(o.scene, "config/scenes/demo.yaml");
+  auto lib = std::make_shared<const ModelLibrary>(models);
+  const MatchingConfig cfg = loadMatchingConfig(o.orRoot(o.matching, "config/matching.yaml"));
+  const ClusteringConfig ccfg = loadClusteringConfig(o.root + "/config/clustering.yaml");
+  const ScannerSettings settings = loadScannerSettings(o.root + "/config/scanner.yaml");
+  const Trajectory sweep = loadTrajectories(o.root + "/config/trajectories.yaml").at("demo_sweep");
+  ModelMatcher matcher(lib, cfg);
+  matcher.prepare({});
+  DetectionCounts total;
+  std::vector<double> terr, rerr;
+  json out = {{"calibration", "the simulator's true calibration (a self-calibrated run is issue 14, item 2)"},
+              {"success", {{"max_t_mm", o.max_t_mm}, {"max_r_deg", o.max_r_deg}}},
+              {"seeds", json::array()}};
+  for (const uint64_t seed : seeds) {
+    const GeneratedScene g = generateScene(base, models, seed, {}, out_dir);
+    const ScannerRenderer renderer(std::make_shared<CellGeometry>(g.scene));
+    ScanCloud cloud = simulateScan(renderer, sweep.poses, ScannerCalibration::fromScene(g.scene), settings.line,
+                                   settings.triangulation, seed);
+    if (settings.has_workspace) cloud = cropBox(cloud, settings.workspace);
+    cloud = statisticalOutlierRemoval(cloud, settings.outlier_k, settings.outlier_std);
+    const ClusteringResult cr = clusterScene(cloud, ccfg);
+    std::vector<ScanCloud> clusters;
+    for (const auto& c : cr.clusters) clusters.push_back(c.cloud);
+    const Eigen::Vector3f eye = g.scene.scanner_camera.T_base_camera.translation().cast<float>();
+    const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
+                                  static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
+    MatchStats st;
+    const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr);
+    std::vector<ScoredDetection> dets;
+    for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse});
+    DetectionCounts counts;
+    std::vector<double> t1, r1;
+    json sj = scoreDetections(g.scene, *lib, matcher, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, &counts, &t1, &r1);
+    sj["seed"] = seed;
+    sj["scene"] = g.file;
+    sj["points"] = cloud.size();
+    sj["clusters"] = clusters.size();
+    sj["locate_seconds"] = st.seconds;
+    out["seeds"].push_back(sj);
+    total.tp += counts.tp;
+    total.fp += counts.fp;
+    total.fn += counts.fn;
+    terr.insert(terr.end(), t1.begin(), t1.end());
+    rerr.insert(rerr.end(), r1.begin(), r1.end());
+    std::printf("seed %llu: %d found, %d missed, %d false (%zu objects, %zu distractors), median %.3f mm %.3f deg\n",
+                static_cast<unsigned long long>(seed), counts.tp, counts.fn, counts.fp, g.scene.objects.size(),
+                g.distractors.size(), median(t1), median(r1));
+    std::fflush(stdout);
+  }
+  out["tp"] = total.tp;
+  out["fp"] = total.fp;
+  out["fn"] = total.fn;
+  out["precision"] = total.precision();
+  out["recall"] = total.recall();
+  out["f1"] = total.f1();
+  out["median_t_err_mm"] = median(terr);
+  out["median_r_err_deg"] = median(rerr);
+  writeJson(o.json, out);
+  std::printf("cells: %zu seeds, P %.3f R %.3f F1 %.3f, median %.3f mm %.3f deg\n", seeds.size(), total.precision(),
+              total.recall(), total.f1(), median(terr), median(rerr));
+  return 0;
 }
 
 /// A mesh model located in a real scene without ground truth (e.g. UWA): fitness, RMSE and an
@@ -555,12 +649,37 @@ int main(int argc, char** argv) {
   c_real->add_option("--json", real.json, "write the result to this JSON file");
   c_real->add_option("--png", real.png, "draw an overlay (scene grey, placed model red, seen from the sensor) to this PNG");
 
+  Options cells;
+  cells.max_t_mm = cells.max_r_deg = 5;  // found: the right model within 5 mm / 5° (as the demo)
+  std::vector<uint64_t> cell_seeds;
+  std::string seeds_file, cells_out = "/tmp/cellsight_cells";
+  CLI::App* c_cells = app.add_subcommand("cells", "random cells (scene generator) scanned in-process, clustered and located: "
+                                                  "detection P/R/F1 and errors over seeds");
+  addSceneOptions(c_cells, cells);
+  addSuccessOptions(c_cells, cells);
+  c_cells->add_option("--matching", cells.matching, "matching settings YAML [default: <root>/config/matching.yaml]")
+      ->check(CLI::ExistingFile);
+  c_cells->add_option("--seeds", cell_seeds, "scene seeds");
+  c_cells->add_option("--seeds-file", seeds_file, "a seeds file, e.g. config/heldout_seeds.yaml")->check(CLI::ExistingFile);
+  c_cells->add_option("--out", cells_out, "where the generated scenes go")->capture_default_str();
+  c_cells->add_option("--json", cells.json, "write the figures to this JSON file");
+
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
+  if (!seeds_file.empty()) {
+    YamlMap m(loadYamlFile(seeds_file), seeds_file);
+    for (const auto& s : m.raw("seeds")) cell_seeds.push_back(s.as<uint64_t>());
+    m.getString("base");
+    m.finish();
+  }
   occ.min_fitness_given = min_fitness->count() > 0;
   return cellsight_tools::runTool([&] {
     if (c_demo->parsed()) return runDemo(demo);
     if (c_occ->parsed()) return runOcclusion(occ);
     if (c_out->parsed()) return runOutliers(outl);
+    if (c_cells->parsed()) {
+      if (cell_seeds.empty()) throw std::invalid_argument("cells: give --seeds or --seeds-file");
+      return runCells(cells, cell_seeds, cells_out);
+    }
     return runReal(real);
   });
 }

@@ -22,9 +22,9 @@ struct SceneGeneratorOptions {
   double margin = 0.004;        ///< m between footprints (and to the workspace's edge)
 };
 
-/// The stable resting orientations of a mesh on a plane: for each flat side (area >= 3 % of the
-/// surface) whose support polygon holds the centroid's projection, the rotation that puts that
-/// side face down. The first is the mesh's own frame when it stands on z = min.
+/// The resting orientations of a mesh on a plane: first the mesh as modelled (standing on its
+/// z-min, the scenes' convention), then, for each flat side (area >= 3 % of the surface) whose
+/// support polygon holds the centroid's projection, the rotation that puts that side face down.
 std::vector<Eigen::Matrix3d> stableRestRotations(const TriangleMesh& mesh);
 
 struct GeneratedScene {
