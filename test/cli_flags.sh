@@ -33,5 +33,16 @@ check "calibrate --square 25mm" 1 "--square" "$BIN/cellsight_calibrate" intrinsi
 check "calibrate unknown subcommand" 1 "intrinsic" "$BIN/cellsight_calibrate" intrinsic
 check "evaluate_localization occlusion --help" 0 "--trials" "$BIN/cellsight_evaluate_localization" occlusion --help
 check "scanner_accuracy sim --help" 0 "--scene" "$BIN/cellsight_scanner_accuracy" sim --help
+# validate_config: a bad file is reported as ERROR only, never "ok" first
+BAD=$(mktemp -d)
+printf 'outlier_k: -5\n' >"$BAD/scanner.yaml"
+out=$("$BIN/cellsight_validate_config" "$BAD/scanner.yaml" 2>&1)
+if [ $? -ne 0 ] && grep -q "^ERROR .*outlier_k" <<<"$out" && ! grep -q "^ok" <<<"$out"; then
+  passed=$((passed + 1))
+else
+  echo "FAIL: validate_config on a bad file: $out"
+  failed=$((failed + 1))
+fi
+rm -rf "$BAD"
 echo "$passed passed, $failed failed"
 [ $failed -eq 0 ]

@@ -165,7 +165,10 @@ ClusteringConfig loadClusteringConfig(const std::string& path) {
   c.min_cluster_points = m.getInt("min_cluster_points", c.min_cluster_points);
   c.max_cluster_points = m.getInt("max_cluster_points", c.max_cluster_points);
   if (c.max_cluster_points < c.min_cluster_points) m.fail("max_cluster_points", "must be >= min_cluster_points");
-  c.max_input_points = static_cast<size_t>(m.getInt("max_input_points", static_cast<int>(c.max_input_points)));
+  const int max_input = m.getInt("max_input_points", static_cast<int>(c.max_input_points));
+  if (max_input < 1000) m.fail("max_input_points", "must be >= 1000 (got " + std::to_string(max_input) + ")");
+  c.max_input_points = static_cast<size_t>(max_input);
+  if (c.min_cluster_points < 1) m.fail("min_cluster_points", "must be >= 1");
   m.finish();
   return c;
 }

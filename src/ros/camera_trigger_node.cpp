@@ -17,6 +17,7 @@
 #include <tf2_ros/transform_listener.h>
 
 #include <condition_variable>
+#include <cmath>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -120,6 +121,11 @@ class CameraTrigger {
     if (!resolvePoses(goal, poses, name, err)) {
       result.status = ScanResult::INVALID_GOAL;
       result.message = err;
+      return;
+    }
+    if (!std::isfinite(goal.speed_scale) || goal.speed_scale < 0 || goal.speed_scale > 1) {
+      result.status = ScanResult::INVALID_GOAL;
+      result.message = "speed_scale must lie in [0, 1] (0: the default 0.1), got " + std::to_string(goal.speed_scale);
       return;
     }
     if (!move_client_.waitForExistence(ros::Duration(30.0))) {
@@ -264,7 +270,7 @@ class CameraTrigger {
   }
 
   bool runContinuous(const Poses& poses, double speed_scale, ScanResult& result, uint32_t& captured) {
-    if (speed_scale <= 0 || speed_scale > 1) speed_scale = 0.1;
+    if (!(speed_scale > 0 && speed_scale <= 1)) speed_scale = 0.1;  // 0: the default (NaN never gets here)
     double expected = 0;
     if (!move(poses.front(), 1.0, result, expected) || !waitInPosition(expected, 0, result)) return false;
     acknowledge();

@@ -9,6 +9,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <condition_variable>
 #include <fstream>
@@ -94,6 +95,11 @@ class CellSim {
       res.status = MoveFlange::Response::REJECTED_INVALID;
       res.message = "target frame '" + req.target.header.frame_id + "' is not the robot base '" +
                     s.base_frame + "'";
+      return true;
+    }
+    if (!std::isfinite(req.speed_scale) || req.speed_scale < 0 || req.speed_scale > 1) {
+      res.status = MoveFlange::Response::REJECTED_INVALID;
+      res.message = "speed_scale must lie in [0, 1] (0: full speed), got " + std::to_string(req.speed_scale);
       return true;
     }
     Eigen::Isometry3d target;

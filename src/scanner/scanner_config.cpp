@@ -70,8 +70,11 @@ ScannerSettings loadScannerSettings(const std::string& path) {
     t.finish();
   }
   s.outlier_k = m.getInt("outlier_k", s.outlier_k);
+  if (s.outlier_k < 0) m.fail("outlier_k", "must be >= 0 (0: no outlier removal)");
   s.outlier_std = m.getDouble("outlier_std", s.outlier_std);
+  if (!(s.outlier_std > 0)) m.fail("outlier_std", "must be > 0 (standard deviations)");
   s.normal_k = m.getInt("normal_k", s.normal_k);
+  if (s.normal_k != 0 && s.normal_k < 3) m.fail("normal_k", "must be 0 (no normals) or >= 3 (neighbours of a plane fit)");
   if (m.has("workspace_min") || m.has("workspace_max")) {
     const Eigen::Vector3f lo = m.getVector3("workspace_min").cast<float>(), hi = m.getVector3("workspace_max").cast<float>();
     if ((hi.array() <= lo.array()).any()) m.fail("workspace_max", "must exceed workspace_min on every axis");

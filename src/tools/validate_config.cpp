@@ -108,7 +108,8 @@ int main(int argc, char** argv) {
   int bad = 0;
   for (const auto& f : files) {
     try {
-      std::cout << "ok    " << f << ": " << validateFile(f) << "\n";
+      const std::string what = validateFile(f);  // first: "ok" is printed only for a file that loaded
+      std::cout << "ok    " << f << ": " << what << "\n";
     } catch (const std::exception& e) {
       std::cout << "ERROR " << e.what() << "\n";
       ++bad;

@@ -95,6 +95,19 @@ TEST(ShippedConfig, ScannerSettingsLoadAndTypoIsNamed) {
   EXPECT_NE(msg.find("line.estimater: unknown key"), std::string::npos) << msg;
 }
 
+TEST(ShippedConfig, ScannerSettingsRefuseValuesThatPassAsNumbers) {
+  const std::string dir = cellsight_test::tempDir();
+  for (const auto& [text, key] : std::vector<std::pair<std::string, std::string>>{
+           {"outlier_k: -5\n", "outlier_k"}, {"normal_k: 1\n", "normal_k"}, {"outlier_std: .nan\n", "outlier_std"},
+           {"line: {max_run: 0}\n", "line.max_run"}, {"line: {min_contrast: -1}\n", "line.min_contrast"}}) {
+    cellsight_test::writeText(dir + "/s.yaml", text);
+    const std::string msg = cellsight_test::errorOf([&] { loadScannerSettings(dir + "/s.yaml"); });
+    EXPECT_NE(msg.find(key + ": must be"), std::string::npos) << text << " -> " << msg;
+  }
+  cellsight_test::writeText(dir + "/s.yaml", "normal_k: 0\noutlier_k: 0\n");  // both switched off: fine
+  EXPECT_EQ(cellsight_test::errorOf([&] { loadScannerSettings(dir + "/s.yaml"); }), "");
+}
+
 TEST(BadConfig, GoodBaseSceneLoads) { EXPECT_EQ(sceneError(kGoodScene), ""); }
 
 TEST(BadConfig, UnknownKeyIsNamed) {

@@ -82,4 +82,10 @@ TEST(Clustering, ShippedConfigLoadsAndTyposAreNamed) {
   cellsight_test::writeText(dir + "/c.yaml", "cluster_tolerence: 0.003\n");
   const std::string msg = cellsight_test::errorOf([&] { loadClusteringConfig(dir + "/c.yaml"); });
   EXPECT_NE(msg.find("cluster_tolerence: unknown key"), std::string::npos) << msg;
+  for (const auto& [text, key] : std::vector<std::pair<std::string, std::string>>{
+           {"max_input_points: -1\n", "max_input_points"}, {"min_cluster_points: 0\n", "min_cluster_points"}}) {
+    cellsight_test::writeText(dir + "/c.yaml", text);
+    const std::string e = cellsight_test::errorOf([&] { loadClusteringConfig(dir + "/c.yaml"); });
+    EXPECT_NE(e.find(key + ": must be"), std::string::npos) << text << " -> " << e;
+  }
 }

@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 
+#include <cmath>
+
 #include "cellsight/MoveFlange.h"
 #include "cellsight/ScanAction.h"
 
@@ -25,6 +27,21 @@ TEST(ScanBadInput, UnknownTrajectoryIsRefused) {
   EXPECT_EQ(client.getState(), actionlib::SimpleClientGoalState::ABORTED);
   EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::INVALID_GOAL);
   EXPECT_NE(client.getResult()->message.find("no_such_trajectory"), std::string::npos);
+}
+
+TEST(ScanBadInput, NanSpeedScaleIsRefused) {
+  actionlib::SimpleActionClient<cellsight::ScanAction> client("scan", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(30)));
+  cellsight::ScanGoal goal;
+  goal.poses.header.frame_id = "base_link";
+  goal.poses.poses.resize(1);
+  goal.poses.poses[0].orientation.w = 1;
+  goal.continuous = true;
+  goal.speed_scale = std::nan("");
+  client.sendGoal(goal);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20)));
+  EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::INVALID_GOAL);
+  EXPECT_NE(client.getResult()->message.find("speed_scale"), std::string::npos) << client.getResult()->message;
 }
 
 TEST(ScanBadInput, RobotThatNeverArrivesAbortsWithAClearStatus) {
