@@ -5,12 +5,39 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
 
 namespace cellsight {
+
+namespace {
+
+/// `<path>.tmp.<pid>` files whose writer is gone (killed between create and rename) are removed:
+/// an interrupted write leaves no leftovers after the next write of the same file.
+void removeStaleTemporaries(const std::string& path) {
+  namespace fs = std::filesystem;
+  const fs::path target(path);
+  const std::string prefix = target.filename().string() + ".tmp.";
+  std::error_code ec;
+  const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string pid_text = name.substr(prefix.size());
+    if (pid_text.empty() || pid_text.find_first_not_of("0123456789") != std::string::npos) continue;
+    const long pid = std::strtol(pid_text.c_str(), nullptr, 10);
+    if (pid == ::getpid()) continue;
+    if (pid > 0 && ::kill(static_cast<pid_t>(pid), 0) == 0) continue;  // its writer still runs
+    if (pid > 0 && errno == EPERM) continue;                           // alive, another user's
+    fs::remove(it->path(), ec);
+  }
+}
+
+}  // namespace
 
 void writeFileAtomic(const std::string& path, const std::string& content) {
   const std::string tmp = path + ".tmp." + std::to_string(::getpid());
@@ -41,6 +68,7 @@ void writeFileAtomic(const std::string& path, const std::string& content) {
     ::unlink(tmp.c_str());
     throw std::runtime_error(path + ": rename of the temporary file failed: " + err);
   }
+  removeStaleTemporaries(path);
 }
 
 std::string parentDir(const std::string& path) {

@@ -1,4 +1,8 @@
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <fstream>
 
 #include "cellsight/common/calibration.hpp"
 #include "cellsight/common/file_io.hpp"
@@ -91,4 +95,20 @@ TEST(Calibration, TwoFilesForOneFrameAreRefused) {
   cellsight::saveTransformCalibration(dir + "/laser_old.yaml", c);
   const std::string msg = errorOf([&] { cellsight::loadCalibrationFolder(dir); });
   EXPECT_NE(msg.find("laser_old.yaml: frame 'laser' is already calibrated in"), std::string::npos) << msg;
+}
+
+TEST(FileIo, AnInterruptedWriteLeavesNoTemporaryBehind) {
+  const std::string dir = cellsight_test::tempDir();
+  const pid_t child = fork();  // a process that is surely gone: a writer killed mid-write
+  if (child == 0) _exit(0);
+  ASSERT_GT(child, 0);
+  waitpid(child, nullptr, 0);
+  const std::string stale = dir + "/x.yaml.tmp." + std::to_string(child);
+  const std::string live = dir + "/x.yaml.tmp." + std::to_string(getppid());  // a writer still running
+  cellsight_test::writeText(stale, "half written");
+  cellsight_test::writeText(live, "being written");
+  cellsight::writeFileAtomic(dir + "/x.yaml", "a: 1\n");
+  EXPECT_FALSE(std::ifstream(stale).good()) << "the dead writer's temporary is still there";
+  EXPECT_TRUE(std::ifstream(live).good()) << "a running writer's temporary was removed";
+  EXPECT_TRUE(std::ifstream(dir + "/x.yaml").good());
 }

@@ -6,7 +6,8 @@ namespace cellsight {
 
 /// Writes `content` to `path` atomically: a temporary file in the same folder, flushed and
 /// fsync'ed, then renamed over the target. On any failure the old file stays as it was and a
-/// std::runtime_error names the path.
+/// std::runtime_error names the path. Temporary files of earlier writes of the same path whose
+/// process is gone (`<path>.tmp.<pid>`, left by a kill between create and rename) are removed.
 void writeFileAtomic(const std::string& path, const std::string& content);
 
 /// Directory part of a path ("." when there is none).
