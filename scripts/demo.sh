@@ -42,7 +42,7 @@ deadline=$(( $(date +%s) + 600 ))
 while [ ! -f "$OUT/scan_result.json" ]; do
   if ! kill -0 "$LAUNCH_PID" 2>/dev/null || grep -qE "(camera_trigger|scan_client|triangulation|cell_sim).*has died" "$OUT/launch.log"; then
     echo "demo: FAILED: the scan did not complete; see $OUT/launch.log" >&2
-    grep -E "ERROR|FATAL|died" "$OUT/launch.log" | tail -5 >&2 || true
+    grep -E "ERROR|FATAL|died" "$OUT/launch.log" | tail -5 >&2 || echo "demo: (no ERROR or FATAL line in launch.log)" >&2
     exit 1
   fi
   if [ "$(date +%s)" -gt "$deadline" ]; then
@@ -57,7 +57,7 @@ deadline=$(( $(date +%s) + 180 ))
 while [ ! -f "$OUT/detections_raw.json" ]; do
   if [ "$(date +%s)" -gt "$deadline" ] || grep -q "model_matching.*has died" "$OUT/launch.log"; then
     echo "demo: FAILED: no detections 180 s after the scan; see $OUT/launch.log" >&2
-    grep -E "model_matching|clustering" "$OUT/launch.log" | tail -5 >&2 || true
+    grep -E "model_matching|clustering" "$OUT/launch.log" | tail -5 >&2 || echo "demo: (no model_matching or clustering line in launch.log)" >&2
     exit 1
   fi
   sleep 0.5
@@ -73,8 +73,14 @@ else
   echo "demo: warning: could not read the image topic's bus statistics" >&2
 fi
 kill -INT "$LAUNCH_PID"
-wait "$LAUNCH_PID" || true
+launch_rc=0
+wait "$LAUNCH_PID" || launch_rc=$?
 LAUNCH_PID=""
+# roslaunch exits 0 after an INT; anything else means a node or roslaunch itself failed
+if [ "$launch_rc" -ne 0 ]; then
+  echo "demo: FAILED: roslaunch exited with status $launch_rc on shutdown; see $OUT/launch.log" >&2
+  exit 1
+fi
 t5=$(now)
 if ! /usr/bin/python3 -c 'import json,sys; sys.exit(json.load(open(sys.argv[1]))["status"])' "$OUT/scan_result.json"; then
   echo "demo: FAILED: the scan was aborted: $(cat "$OUT/scan_result.json")" >&2
@@ -84,8 +90,11 @@ fi
 "$CELLSIGHT_BUILD/devel/lib/cellsight/cellsight_scanner_accuracy" scan --scene config/scenes/demo.yaml \
   --cloud "$OUT/scan.ply" --k 5 --json "$OUT/scanner_eval.json" >/dev/null
 # Localisation figures: the detections against the simulator's truth.
+# Exit 3 when a part is missed or a false one found: the report is still written, then the demo
+# fails with that cause at its end.
+eval_rc=0
 "$CELLSIGHT_BUILD/devel/lib/cellsight/cellsight_evaluate_localization" demo --scene config/scenes/demo.yaml \
-  --detections "$OUT/detections_raw.json" --json "$OUT/detections.json" || true
+  --detections "$OUT/detections_raw.json" --json "$OUT/detections.json" || eval_rc=$?
 t6=$(now)
 
 /usr/bin/python3 - "$OUT" "$t0" "$t1" "$t2" "$t3" "$t4" "$t5" "$t6" <<'PY'
@@ -174,4 +183,8 @@ if len(frames["frames"]) != frames["poses"] or missing:
     print("demo: FAILED: frames %d/%d, topics missing from the bag: %s" % (len(frames["frames"]), frames["poses"], missing))
     sys.exit(1)
 PY
+if [ "$eval_rc" -ne 0 ]; then
+  echo "demo: FAILED: the localisation evaluation exited with $eval_rc (3: a part missed or a false detection); see $OUT/detections.json" >&2
+  exit 1
+fi
 echo "demo: done: $OUT"

@@ -81,20 +81,13 @@ class ModelMatching {
     // the settings file's acceptance thresholds are the starting values of ~ (rqt_reconfigure)
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<cellsight::MatchingAcceptanceConfig>>(reconfigure_mutex_, pnh);
     cellsight::MatchingAcceptanceConfig start;
-    copyThresholds(cellsight::acceptanceOf(matcher_->config()), &start);
+    cellsight::copyAcceptance(cellsight::acceptanceOf(matcher_->config()), &start);
     reconfigure_->updateConfig(start);
     reconfigure_->setCallback([this](cellsight::MatchingAcceptanceConfig& c, uint32_t) { onReconfigure(c); });
     if (frame_rate > 0) frame_timer_ = nh.createTimer(ros::Duration(1.0 / frame_rate), &ModelMatching::onFrameTimer, this);
   }
 
  private:
-  static void copyThresholds(const cellsight::AcceptanceThresholds& t, cellsight::MatchingAcceptanceConfig* c) {
-    c->min_fitness = t.min_fitness;
-    c->min_coverage = t.min_coverage;
-    c->max_rmse = t.max_rmse;
-    c->max_instances = t.max_instances;
-  }
-
   /// New acceptance thresholds, checked like config/matching.yaml; refused ones are logged and
   /// the running values sent back. Callbacks are serial (one spinner thread): no locate() runs.
   void onReconfigure(cellsight::MatchingAcceptanceConfig& c) {
@@ -104,7 +97,7 @@ class ModelMatching {
                c.min_fitness, c.min_coverage, c.max_rmse * 1e3, c.max_instances);
     } catch (const std::exception& e) {
       ROS_ERROR("model_matching: reconfigure refused: %s; the running thresholds stay", e.what());
-      copyThresholds(cellsight::acceptanceOf(matcher_->config()), &c);
+      cellsight::copyAcceptance(cellsight::acceptanceOf(matcher_->config()), &c);
     }
   }
 

@@ -59,21 +59,12 @@ class Triangulation {
     // the settings file's thresholds are the starting values of ~ (rqt_reconfigure)
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<cellsight::ScannerLineConfig>>(reconfigure_mutex_, pnh);
     cellsight::ScannerLineConfig start;
-    copyThresholds(cellsight::lineThresholdsOf(line_), &start);
+    cellsight::copyLineThresholds(cellsight::lineThresholdsOf(line_), &start);
     reconfigure_->updateConfig(start);
     reconfigure_->setCallback([this](cellsight::ScannerLineConfig& c, uint32_t) { onReconfigure(c); });
   }
 
  private:
-  static void copyThresholds(const cellsight::LineThresholds& t, cellsight::ScannerLineConfig* c) {
-    c->min_contrast = t.min_contrast;
-    c->threshold_fraction = t.threshold_fraction;
-    c->max_run = t.max_run;
-    c->secondary_peak_ratio = t.secondary_peak_ratio;
-    c->min_segment = t.min_segment;
-    c->segment_max_jump = t.segment_max_jump;
-  }
-
   /// New thresholds from dynamic_reconfigure, checked like config/scanner.yaml; refused ones are
   /// logged and the running values sent back.
   void onReconfigure(cellsight::ScannerLineConfig& c) {
@@ -84,10 +75,10 @@ class Triangulation {
     if (!bad.first.empty()) {
       ROS_ERROR("triangulation: reconfigure refused: %s %s; the running thresholds stay", bad.first.c_str(),
                 bad.second.c_str());
-      copyThresholds(cellsight::lineThresholdsOf(line_), &c);
+      cellsight::copyLineThresholds(cellsight::lineThresholdsOf(line_), &c);
       return;
     }
-    cellsight::applyLineThresholds(t, &line_);
+    cellsight::copyLineThresholds(t, &line_);
     ROS_INFO("triangulation: line thresholds now min_contrast %.1f, threshold_fraction %.2f, max_run %d, "
              "secondary_peak_ratio %.2f, min_segment %d, segment_max_jump %.2f",
              t.min_contrast, t.threshold_fraction, t.max_run, t.secondary_peak_ratio, t.min_segment, t.segment_max_jump);

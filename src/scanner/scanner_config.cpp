@@ -8,15 +8,6 @@ LineThresholds lineThresholdsOf(const LineExtractionConfig& c) {
   return {c.min_contrast, c.threshold_fraction, c.max_run, c.secondary_peak_ratio, c.min_segment, c.segment_max_jump};
 }
 
-void applyLineThresholds(const LineThresholds& t, LineExtractionConfig* c) {
-  c->min_contrast = t.min_contrast;
-  c->threshold_fraction = t.threshold_fraction;
-  c->max_run = t.max_run;
-  c->secondary_peak_ratio = t.secondary_peak_ratio;
-  c->min_segment = t.min_segment;
-  c->segment_max_jump = t.segment_max_jump;
-}
-
 std::pair<std::string, std::string> checkLineThresholds(const LineThresholds& t) {
   if (!(t.min_contrast >= 0)) return {"min_contrast", "must be >= 0 (grey levels)"};
   if (!(t.threshold_fraction > 0 && t.threshold_fraction < 1)) return {"threshold_fraction", "must lie in (0, 1)"};

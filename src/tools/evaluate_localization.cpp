@@ -1,4 +1,4 @@
-// cellsight_evaluate_localization: localisation figures against ground truth (issue 4).
+// cellsight_evaluate_localization: localisation figures against ground truth.
 // Usage: cellsight_evaluate_localization SUBCOMMAND [OPTIONS]   (--help on the tool and each subcommand)
 //   demo       detections of the demo scan vs the simulator's truth → detections.json
 //              --detections detections_raw.json [--scene S.yaml] [--models F] [--root R]
@@ -9,9 +9,9 @@
 //   outliers   uniform outliers with random normals in the workspace box, 0…200 % of the points
 //              [--parts blade,housing,holder,bracket] [--trials 50] [--ratios 0,0.25,0.5,1,1.5,2]
 //              + the sweep options below
-//   real       a mesh model located in a real scene without truth (e.g. UWA): --model mesh.ply
-//              --scene scene.ply --matching M.yaml [--scale 0.001] [--json out.json] [--png overlay.png];
-//              exit 3 when not found
+//   cells      random cells (scene generator) scanned in-process, clustered, located: P/R/F1
+//              --seeds N... | --seeds-file config/heldout_seeds.yaml [--out DIR] [--json out.json]
+//   (a part in a real scan from files: cellsight_locate)
 //   sweep options (occlusion, outliers): [--search all|self] [--root repo] [--scene S.yaml]
 //              [--models folder] [--matching matching.yaml] [--max-t-mm 2] [--max-r-deg 2]
 //              [--json out.json] [--png curves.png]
@@ -20,8 +20,6 @@
 //   No gnuplot, or a failing one: a warning, the JSON is still written (it is the result).
 // Bad or unknown options are reported by CLI11 (non-zero exit); failures at run time print
 // "error: ..." and exit 1.
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include <sys/wait.h>
 #include <unistd.h>
@@ -39,7 +37,6 @@
 
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/common/yaml_reader.hpp"
-#include "cellsight/eval/overlay.hpp"
 #include "cellsight/common/trajectory.hpp"
 #include "cellsight/scanner/scanner_config.hpp"
 #include "cellsight/localization/clustering.hpp"
@@ -70,8 +67,7 @@ struct Options {
   bool min_fitness_given = false;
   std::vector<std::string> parts;
   std::vector<double> ratios;
-  std::string detections, model;
-  double scale = 1;
+  std::string detections;
   /// `value`, or `<root>/<relative>` when not given
   std::string orRoot(const std::string& value, const std::string& relative) const {
     return value.empty() ? root + "/" + relative : value;
@@ -518,51 +514,6 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   return 0;
 }
 
-/// A mesh model located in a real scene without ground truth (e.g. UWA): fitness, RMSE and an
-/// overlay (scene grey, the placed model red, seen from the sensor).
-int runReal(const Options& o) {
-  const double scale = o.scale;
-  const TriangleMesh mesh = loadMesh(o.model, scale);
-  ScanCloud scene = loadCloud(o.scene);
-  for (auto& p : scene.points) p *= static_cast<float>(scale);
-  auto lib = std::make_shared<ModelLibrary>();
-  lib->addMeshModel("model", mesh);
-  MatchingConfig cfg = loadMatchingConfig(o.matching);
-  cfg.min_coverage = 0;  // a whole scene, not a cluster
-  cfg.max_instances = 1;
-  ModelMatcher m(lib, cfg);
-  const auto t0 = std::chrono::steady_clock::now();
-  m.prepare({});
-  MatchStats st;
-  const auto dets = m.locate({scene}, {}, &st);
-  const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  json j = {{"model", o.model}, {"scene", o.scene}, {"scene_points", scene.size()},
-            {"locate_seconds", st.seconds}, {"with_model_preparation_seconds", total}, {"found", !dets.empty()}};
-  for (const auto& w : st.warnings) j["warnings"].push_back(w);
-  if (!dets.empty()) {
-    const auto& d = dets[0];
-    const Eigen::Quaterniond q(d.pose.linear());
-    j["pose"] = {{"xyz", {d.pose.translation().x(), d.pose.translation().y(), d.pose.translation().z()}},
-                 {"quat", {q.x(), q.y(), q.z(), q.w()}}};
-    j["fitness"] = d.fitness;
-    j["rmse_mm"] = d.rmse * 1e3;
-    std::printf("%s: fitness %.3f, rmse %.3f mm, locate %.2f s (%zu scene points)\n", o.scene.c_str(), d.fitness,
-                d.rmse * 1e3, st.seconds, scene.size());
-  } else {
-    std::printf("%s: not found (locate %.2f s)\n", o.scene.c_str(), st.seconds);
-    for (const auto& r : st.rejected)
-      std::printf("  rejected: fitness %.3f rmse %.3f mm\n", r.fitness, r.rmse * 1e3);
-  }
-  writeJson(o.json, j);
-  if (!o.png.empty()) {
-    const ScanCloud placed = sampleMesh(mesh, std::max(0.002, cfg.voxel), 3);
-    const Eigen::Isometry3f T = dets.empty() ? Eigen::Isometry3f::Identity() : Eigen::Isometry3f(dets[0].pose.cast<float>());
-    std::vector<uchar> buf;
-    cv::imencode(".png", drawDetectionOverlay(scene, placed.points, dets.empty() ? nullptr : &T), buf);
-    writeFileAtomic(o.png, std::string(buf.begin(), buf.end()));
-  }
-  return dets.empty() ? 3 : 0;
-}
 
 /// --root, --scene, --models (demo and the sweeps).
 void addSceneOptions(CLI::App* c, Options& o) {
@@ -600,7 +551,7 @@ int main(int argc, char** argv) {
   using cellsight_tools::fraction;
   using cellsight_tools::positive;
   CLI::App app("Localisation figures against ground truth: the demo scan's detections, the occlusion and outlier "
-               "sweeps on single-view clouds, a model in a real scene.",
+               "sweeps on single-view clouds, random cells.",
                "cellsight_evaluate_localization");
   app.require_subcommand(1);
 
@@ -638,16 +589,6 @@ int main(int argc, char** argv) {
       ->check(cellsight_tools::nonNegative())
       ->capture_default_str();
 
-  Options real;
-  CLI::App* c_real = app.add_subcommand("real", "a mesh model located in a real scene without ground truth (exit 3 when not found)");
-  c_real->add_option("--model", real.model, "model mesh (PLY, STL, ...)")->required()->check(CLI::ExistingFile);
-  c_real->add_option("--scene", real.scene, "scene cloud (PLY, PCD)")->required()->check(CLI::ExistingFile);
-  c_real->add_option("--matching", real.matching, "matching settings YAML")->required()->check(CLI::ExistingFile);
-  c_real->add_option("--scale", real.scale, "scale of the model and scene coordinates to metres (0.001: mm)")
-      ->check(positive())
-      ->capture_default_str();
-  c_real->add_option("--json", real.json, "write the result to this JSON file");
-  c_real->add_option("--png", real.png, "draw an overlay (scene grey, placed model red, seen from the sensor) to this PNG");
 
   Options cells;
   cells.max_t_mm = cells.max_r_deg = 5;  // found: the right model within 5 mm / 5° (as the demo)
@@ -680,6 +621,6 @@ int main(int argc, char** argv) {
       if (cell_seeds.empty()) throw std::invalid_argument("cells: give --seeds or --seeds-file");
       return runCells(cells, cell_seeds, cells_out);
     }
-    return runReal(real);
+    return 2;  // not reached: a subcommand is required
   });
 }

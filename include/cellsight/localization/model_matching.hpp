@@ -137,12 +137,21 @@ Eigen::Isometry3d canonicalPose(const ModelInfo& info, const Eigen::Vector3d& ce
 
 /// The acceptance thresholds of the validation stage: the settings that may change while a
 /// matcher runs (model_matching's dynamic_reconfigure), without rebuilding any model data.
+/// (The defaults live in MatchingConfig: take them with acceptanceOf({}).)
 struct AcceptanceThresholds {
-  double min_fitness = 0.35;
-  double min_coverage = 0.6;
-  double max_rmse = 0.0015;  ///< m
-  int max_instances = 3;
+  double min_fitness = 0, min_coverage = 0;
+  double max_rmse = 0;  ///< m
+  int max_instances = 0;
 };
+/// Copies the thresholds into anything with fields of the same names (MatchingConfig, the node's
+/// dynamic_reconfigure config).
+template <typename Config>
+void copyAcceptance(const AcceptanceThresholds& t, Config* c) {
+  c->min_fitness = t.min_fitness;
+  c->min_coverage = t.min_coverage;
+  c->max_rmse = t.max_rmse;
+  c->max_instances = t.max_instances;
+}
 AcceptanceThresholds acceptanceOf(const MatchingConfig& c);
 /// The rules loadMatchingConfig applies to these keys: {"", ""} when valid, else {key, why}.
 std::pair<std::string, std::string> checkAcceptance(const AcceptanceThresholds& t);

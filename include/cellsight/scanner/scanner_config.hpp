@@ -22,16 +22,26 @@ struct ScannerSettings {
 
 /// The line-extraction thresholds a user tunes on a running cell (triangulation's
 /// dynamic_reconfigure); the YAML loader applies the same checks to them.
+/// (The defaults live in LineExtractionConfig: take them with lineThresholdsOf({}).)
 struct LineThresholds {
-  double min_contrast = 25;
-  double threshold_fraction = 0.5;
-  int max_run = 40;
-  double secondary_peak_ratio = 0.6;
-  int min_segment = 5;
-  double segment_max_jump = 1.0;
+  double min_contrast = 0, threshold_fraction = 0;
+  int max_run = 0;
+  double secondary_peak_ratio = 0;
+  int min_segment = 0;
+  double segment_max_jump = 0;
 };
+/// Copies the thresholds into anything with fields of the same names (LineExtractionConfig, the
+/// node's dynamic_reconfigure config).
+template <typename Config>
+void copyLineThresholds(const LineThresholds& t, Config* c) {
+  c->min_contrast = t.min_contrast;
+  c->threshold_fraction = t.threshold_fraction;
+  c->max_run = t.max_run;
+  c->secondary_peak_ratio = t.secondary_peak_ratio;
+  c->min_segment = t.min_segment;
+  c->segment_max_jump = t.segment_max_jump;
+}
 LineThresholds lineThresholdsOf(const LineExtractionConfig& c);
-void applyLineThresholds(const LineThresholds& t, LineExtractionConfig* c);
 /// {"", ""} when valid, else {key, why} (the YAML loader's rules for these keys).
 std::pair<std::string, std::string> checkLineThresholds(const LineThresholds& t);
 

@@ -23,10 +23,7 @@ std::pair<std::string, std::string> checkAcceptance(const AcceptanceThresholds& 
 
 void ModelMatcher::setAcceptance(const AcceptanceThresholds& t) {
   if (const auto bad = checkAcceptance(t); !bad.first.empty()) throw ConfigError(bad.first + " " + bad.second);
-  config_.min_fitness = t.min_fitness;
-  config_.min_coverage = t.min_coverage;
-  config_.max_rmse = t.max_rmse;
-  config_.max_instances = t.max_instances;
+  copyAcceptance(t, &config_);
 }
 
 MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_diagonal, double scene_spacing) {
