@@ -24,7 +24,7 @@ PACKAGES=(
   # core libraries
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libembree-dev libtbb-dev
   libqrencode-dev libzbar-dev libpcl-dev libpcl-conversions-dev libopen3d-dev
-  libcli11-dev gnuplot-nox libassimp-dev
+  libcli11-dev gnuplot-nox libassimp-dev liborocos-kdl-dev
   # headless rviz screenshots
   xvfb x11-utils imagemagick libgl1-mesa-dri mesa-utils
   # the two-PC test: roslaunch reaches the second "PC" by ssh

@@ -1,5 +1,8 @@
 #include "cellsight/eval/sim_scan.hpp"
 
+#include "cellsight/common/calibration.hpp"
+#include "cellsight/common/errors.hpp"
+
 #include <chrono>
 #include <cmath>
 
@@ -10,6 +13,36 @@ ScannerCalibration ScannerCalibration::fromScene(const Scene& s) {
   c.intrinsics = s.scanner_camera.intrinsics;
   c.T_base_camera = s.scanner_camera.T_base_camera;
   c.T_flange_laser = s.laser.T_flange_laser;
+  c.undistortion = std::make_shared<UndistortionMap>(c.intrinsics);
+  return c;
+}
+
+ScannerCalibration ScannerCalibration::fromFolder(const std::string& dir, const std::string& camera_frame,
+                                                  const std::string& laser_frame, const std::string& camera_name) {
+  const CalibrationSet set = loadCalibrationFolder(dir);
+  ScannerCalibration c;
+  bool cam = false, pose = false, laser = false;
+  for (const auto& [file, t] : set.transforms) {
+    if (t.child_frame == camera_frame) {
+      c.T_base_camera = t.T_parent_child;
+      pose = true;
+    } else if (t.child_frame == laser_frame) {
+      c.T_flange_laser = t.T_parent_child;
+      laser = true;
+    }
+  }
+  for (const std::string& f : set.camera_files) {
+    const CameraIntrinsics k = loadCameraInfoYaml(f);
+    if (k.camera_name == camera_name || set.camera_files.size() == 1) {
+      c.intrinsics = k;
+      cam = true;
+    }
+  }
+  std::string missing;
+  if (!cam) missing += " camera intrinsics (camera_name " + camera_name + ")";
+  if (!pose) missing += " camera pose (child frame " + camera_frame + ")";
+  if (!laser) missing += " light sheet (child frame " + laser_frame + ")";
+  if (!missing.empty()) throw ConfigError(dir + ": the scanner calibration lacks" + missing);
   c.undistortion = std::make_shared<UndistortionMap>(c.intrinsics);
   return c;
 }
@@ -47,13 +80,17 @@ void addProfile(const cv::Mat& image, const Eigen::Isometry3d& T_base_flange,
 ScanCloud simulateScan(const ScannerRenderer& renderer,
                        const std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>>& poses,
                        const ScannerCalibration& cal, const LineExtractionConfig& line,
-                       const TriangulationConfig& tri, uint64_t seed, SimScanStats* stats) {
+                       const TriangulationConfig& tri, uint64_t seed, SimScanStats* stats,
+                       const RobotErrorModel* robot) {
   ScanCloud cloud;
   SimScanStats st;
   using clock = std::chrono::steady_clock;
   for (size_t i = 0; i < poses.size(); ++i) {
     const auto t0 = clock::now();
-    const cv::Mat img = renderer.render(poses[i], seed * 1000003ull + i);
+    // the robot is told (and reports) poses[i]; the flange really goes to `actual`
+    const uint64_t frame_seed = seed * 1000003ull + i;
+    const Eigen::Isometry3d actual = robot ? robot->actual(poses[i], frame_seed) : poses[i];
+    const cv::Mat img = renderer.render(actual, frame_seed);
     const auto t1 = clock::now();
     addProfile(img, poses[i], cal, line, tri, cloud, &st.line);
     st.render_seconds += std::chrono::duration<double>(t1 - t0).count();
@@ -93,7 +130,8 @@ std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> swee
 
 SphereAcceptance sphereAcceptance(const ScannerRenderer& renderer, const SceneObject& sphere,
                                   const ScannerCalibration& cal, const LineExtractionConfig& line,
-                                  const TriangulationConfig& tri, int K, double step, bool filter) {
+                                  const TriangulationConfig& tri, int K, double step, bool filter,
+                                  const RobotErrorModel* robot) {
   const Scene& scene = renderer.geometry().scene();
   const TriangleMesh mesh = loadValidMesh(sphere.info.mesh_file);
   SphereAcceptance out;
@@ -104,7 +142,8 @@ SphereAcceptance sphereAcceptance(const ScannerRenderer& renderer, const SceneOb
     const double yaw = 2 * M_PI * k / K;
     const auto poses = sweepAcross(scene, out.true_center, yaw, out.true_radius + 0.004, step,
                                    scene.robot.home.translation().z());
-    ScanCloud c = simulateScan(renderer, poses, cal, line, tri, scene.noise.seed + 100 + static_cast<uint64_t>(k));
+    ScanCloud c = simulateScan(renderer, poses, cal, line, tri, scene.noise.seed + 100 + static_cast<uint64_t>(k), nullptr,
+                               robot);
     if (filter) c = statisticalOutlierRemoval(c, 20, 3.0);
     std::vector<Eigen::Vector3d> pts;
     for (const auto& p : c.points) {

@@ -18,6 +18,7 @@
 
 #include "cellsight/MoveFlange.h"
 #include "cellsight/sim/ground_truth.hpp"
+#include "cellsight/sim/robot_model.hpp"
 #include "cellsight/sim/renderer.hpp"
 #include "cellsight/sim/scene.hpp"
 #include "cellsight_ros/conversions.hpp"
@@ -42,6 +43,13 @@ class CellSim {
     cellsight_ros::param(pnh, "noise", noise);
     scene.noise.enabled = noise;
     cellsight_ros::param(pnh, "truth_dir", truth_dir_);
+    // Like a camera driver's camera_info_url: the intrinsics the camera publishes with its frames
+    // (a calibration the user made); empty: the simulator's truth.
+    std::string info_file;
+    cellsight_ros::param(pnh, "scanner_camera_info", info_file);
+    bool perfect = scene.as_built.perfect;
+    cellsight_ros::param(pnh, "perfect", perfect);
+    if (perfect && !scene.as_built.perfect) cellsight::makePerfect(scene);
     cellsight_ros::param(pnh, "handshake", handshake_);
     double tf_rate = 100.0;
     cellsight_ros::param(pnh, "tf_rate", tf_rate);
@@ -56,6 +64,21 @@ class CellSim {
              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 
     const cellsight::Scene& s = geometry_->scene();
+    robot_ = cellsight::RobotErrorModel(s.as_built.robot);
+    scanner_info_ = s.scanner_camera.intrinsics;
+    if (!info_file.empty()) {
+      scanner_info_ = cellsight::loadCameraInfoYaml(info_file);
+      if (scanner_info_.width != s.scanner_camera.intrinsics.width || scanner_info_.height != s.scanner_camera.intrinsics.height)
+        throw std::runtime_error("~scanner_camera_info " + info_file + ": " + std::to_string(scanner_info_.width) + "x" +
+                                 std::to_string(scanner_info_.height) + " does not match the camera's " +
+                                 std::to_string(s.scanner_camera.intrinsics.width) + "x" +
+                                 std::to_string(s.scanner_camera.intrinsics.height));
+      ROS_INFO("cell_sim: scanner camera publishes the intrinsics of %s", info_file.c_str());
+    }
+    if (robot_.enabled())
+      ROS_INFO("cell_sim: cell as built: camera and laser mounted off their drawing, robot with kinematic error "
+               "(joint offsets %.3f deg, links %.2f mm, repeatability %.3f mm)", s.as_built.robot.joint_offset_deg,
+               s.as_built.robot.link_mm, s.as_built.robot.repeatability_mm);
     pose_ = s.robot.home;
     if (!truth_dir_.empty()) {
       cellsight::writeSceneTruth(s, truth_dir_);
@@ -209,19 +232,27 @@ class CellSim {
     }
     const cellsight::Scene& s = geometry_->scene();
     const auto t0 = std::chrono::steady_clock::now();
-    const cv::Mat image = scanner_->render(pose, s.noise.seed * 1000003ull + frame_count_);
+    // The controller reports `pose` (tf above); the flange really is at `actual`.
+    Eigen::Isometry3d actual;
+    try {
+      actual = robot_.actual(pose, s.noise.seed * 1000003ull + frame_count_);
+    } catch (const std::exception& e) {
+      ROS_ERROR("cell_sim: %s: frame not captured", e.what());
+      return;
+    }
+    const cv::Mat image = scanner_->render(actual, s.noise.seed * 1000003ull + frame_count_);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    const cellsight::Plane plane = scanner_->planeInCamera(pose);
+    const cellsight::Plane plane = scanner_->planeInCamera(actual);
     auto img = boost::make_shared<sensor_msgs::Image>(
         cellsight_ros::toImageMsg(image, s.scanner_camera.frame_id, stamp));
     auto info = boost::make_shared<sensor_msgs::CameraInfo>(
-        cellsight_ros::toCameraInfo(s.scanner_camera.intrinsics, s.scanner_camera.frame_id, stamp));
+        cellsight_ros::toCameraInfo(scanner_info_, s.scanner_camera.frame_id, stamp));
     scanner_pub_.publish(img, info);
     diag_.processed(ms * 1e-3);
     plane_pub_.publish(cellsight_ros::toPlaneMsg(plane, s.scanner_camera.frame_id, stamp));
     if (frames_truth_.is_open()) {
       frames_truth_ << cellsight::frameTruthJsonLine(frame_count_, cellsight_ros::toNanoseconds(stamp),
-                                                     pose, plane);
+                                                     actual, plane);
       frames_truth_.flush();
     }
     ROS_DEBUG("cell_sim: scanner frame %d rendered in %.1f ms", frame_count_, ms);
@@ -328,6 +359,8 @@ class CellSim {
   std::unique_ptr<cellsight::ScannerRenderer> scanner_;
   std::unique_ptr<cellsight::FixtureRenderer> fixture_;
   std::string truth_dir_;
+  cellsight::RobotErrorModel robot_;
+  cellsight::CameraIntrinsics scanner_info_;
   bool handshake_ = true;
   std::ofstream frames_truth_;
   tf2_ros::TransformBroadcaster tf_;

@@ -162,8 +162,28 @@ Eigen::Isometry3d frameFromThreePoints(const Eigen::Vector3d& o, const Eigen::Ve
 
 ExtrinsicsResult calibrateExtrinsics(const cv::Mat& grey, const ChessboardSpec& board, const CameraIntrinsics& cam,
                                      const Eigen::Isometry3d& T_base_pattern) {
+  const int w = board.inner_corners.width, h = board.inner_corners.height;
+  if ((w + h) % 2 == 0) {
+    throw std::runtime_error("a " + std::to_string(w) + "x" + std::to_string(h) +
+                             " board looks the same after a half turn, so its frame is ambiguous: use inner corner "
+                             "counts of different parity (e.g. 9x6)");
+  }
   std::vector<cv::Point2f> corners;
-  if (!findChessboard(grey, board, corners)) throw std::runtime_error("the calibration pattern was not found in the image");
+  if (!findChessboard(grey, board, corners)) {
+    throw std::runtime_error("the calibration pattern (" + std::to_string(w) + "x" + std::to_string(h) +
+                             " inner corners) was not found in the image: is the whole board in view and in focus?");
+  }
+  // The detector may list the corners from either end. By convention the square between the
+  // first four corners is black (and then the one between the last four is white): reverse the
+  // list when the image says otherwise.
+  auto squareGrey = [&](size_t a, size_t b, size_t c, size_t d) {
+    const cv::Point2f m = (corners[a] + corners[b] + corners[c] + corners[d]) * 0.25f;
+    const float r = 0.15f * static_cast<float>(cv::norm(corners[a] - corners[d]));
+    const cv::Rect roi(cv::Point(cvRound(m.x - r), cvRound(m.y - r)), cv::Point(cvRound(m.x + r) + 1, cvRound(m.y + r) + 1));
+    return cv::mean(grey(roi & cv::Rect(0, 0, grey.cols, grey.rows)))[0];
+  };
+  const size_t n = corners.size(), W = static_cast<size_t>(w);
+  if (squareGrey(0, 1, W, W + 1) > squareGrey(n - 1, n - 2, n - 1 - W, n - 2 - W)) std::reverse(corners.begin(), corners.end());
   const cv::Matx33d K(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
   const std::vector<double> D(cam.dist.begin(), cam.dist.end());
   const auto obj = boardPoints(board);

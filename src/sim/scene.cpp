@@ -2,6 +2,8 @@
 
 #include <sys/stat.h>
 
+#include <cmath>
+#include <random>
 #include <set>
 
 #include "cellsight/common/file_io.hpp"
@@ -214,6 +216,53 @@ Scene loadScene(const std::string& path, const SceneLoadOptions& options) {
     }
     r.finish();
   }
+  s.as_built.drawn_scanner_camera = s.scanner_camera.T_base_camera;
+  s.as_built.drawn_fixture_camera = s.fixture_camera.T_base_camera;
+  s.as_built.drawn_laser = s.laser.T_flange_laser;
+  if (m.has("as_built")) {
+    YamlMap a = m.getMap("as_built");
+    AsBuiltConfig& c = s.as_built;
+    c.perfect = a.getBool("perfect", false);
+    c.seed = static_cast<uint64_t>(a.getInt("seed", 1));
+    auto mount = [&](const std::string& key, double& t_mm, double& r_deg) {
+      if (!a.has(key)) return;
+      YamlMap k = a.getMap(key);
+      t_mm = inRange(k, "translation_mm", 0.0, 0.0, 50.0);
+      r_deg = inRange(k, "rotation_deg", 0.0, 0.0, 10.0);
+      k.finish();
+    };
+    mount("camera_mount", c.camera_translation_mm, c.camera_rotation_deg);
+    mount("laser_mount", c.laser_translation_mm, c.laser_rotation_deg);
+    if (a.has("robot")) {
+      YamlMap r = a.getMap("robot");
+      c.robot.joint_offset_deg = inRange(r, "joint_offset_deg", c.robot.joint_offset_deg, 0.0, 1.0);
+      c.robot.link_mm = inRange(r, "link_mm", c.robot.link_mm, 0.0, 10.0);
+      c.robot.twist_deg = inRange(r, "twist_deg", c.robot.twist_deg, 0.0, 1.0);
+      c.robot.repeatability_mm = inRange(r, "repeatability_mm", c.robot.repeatability_mm, 0.0, 1.0);
+      c.robot.repeatability_deg = inRange(r, "repeatability_deg", c.robot.repeatability_deg, 0.0, 1.0);
+      r.finish();
+    }
+    a.finish();
+    c.robot.enabled = !c.perfect;
+    c.robot.seed = c.seed * 7919 + 17;
+    if (!c.perfect) {
+      // seeded mounting offsets: translation σ per axis, rotation σ per axis (small angles)
+      std::mt19937_64 rng(c.seed);
+      std::normal_distribution<double> n01(0.0, 1.0);
+      auto perturb = [&](Eigen::Isometry3d& T, double t_mm, double r_deg) {
+        const Eigen::Vector3d dt(n01(rng), n01(rng), n01(rng));
+        const Eigen::Vector3d dr(n01(rng), n01(rng), n01(rng));
+        const Eigen::Vector3d w = dr * r_deg * M_PI / 180.0;
+        Eigen::Isometry3d D = Eigen::Isometry3d::Identity();
+        if (w.norm() > 0) D.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+        D.translation() = dt * t_mm * 1e-3;
+        T = T * D;  // offset in the mounted part's own frame
+      };
+      perturb(s.scanner_camera.T_base_camera, c.camera_translation_mm, c.camera_rotation_deg);
+      perturb(s.fixture_camera.T_base_camera, c.camera_translation_mm, c.camera_rotation_deg);
+      perturb(s.laser.T_flange_laser, c.laser_translation_mm, c.laser_rotation_deg);
+    }
+  }
   m.finish();
   // Meshes are loaded and validated by the renderer; check here that each is valid so that a
   // bad mesh fails at start-up with the scene's name attached.
@@ -225,6 +274,14 @@ Scene loadScene(const std::string& path, const SceneLoadOptions& options) {
     }
   }
   return s;
+}
+
+void makePerfect(Scene& scene) {
+  scene.scanner_camera.T_base_camera = scene.as_built.drawn_scanner_camera;
+  scene.fixture_camera.T_base_camera = scene.as_built.drawn_fixture_camera;
+  scene.laser.T_flange_laser = scene.as_built.drawn_laser;
+  scene.as_built.perfect = true;
+  scene.as_built.robot.enabled = false;
 }
 
 }  // namespace cellsight

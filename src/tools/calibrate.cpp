@@ -184,6 +184,7 @@ int main(int argc, char** argv) {
 
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
   return cellsight_tools::runTool([&] {
+    makeDirs(parentDir(o.out));  // the output's folder, as a user expects of --out
     if (in->parsed()) return intrinsics(o);
     if (ex->parsed()) return extrinsics(o);
     return laser(o);

@@ -6,6 +6,9 @@
 //          flatness of a bare table patch.
 //   scan:  a scan made elsewhere (the ROS demo) against the scene's truth, with --k the
 //          in-process K-orientation sphere scans for MPE_AL.
+//   frames: a recorded scan (frames.json + PNGs) triangulated again with a given calibration
+//          (and optionally the simulator's true flange poses): the error budget of a scan.
+//   calibration: a calibration folder against the truth, and the robot's absolute error.
 //   compare: two clouds of the same scan (live, replayed): exit 0 when the same within a tolerance.
 //   cloud: MPE_P / sphere fit on any PLY/PCD cloud near a given centre (real data).
 // Output: JSON on stdout and, with --json FILE, written atomically.
@@ -15,6 +18,8 @@
 //          [--sphere-step-mm 0.5] [--no-filter] [--ply scan.ply] [--json out.json]
 //        cellsight_scanner_accuracy scan --scene S.yaml --cloud scan.ply [--k 5] [--sphere-model sphere25]
 //          [--json out.json]
+//        cellsight_scanner_accuracy frames --frames frames.json --calibration DIR [--flange-truth F.jsonl]
+//          [--scanner-config config/scanner.yaml] [--scene S.yaml] [--ply out.ply] [--json out.json]
 //        cellsight_scanner_accuracy compare --a live.ply --b replay.ply [--tolerance-m 1e-6]
 //        cellsight_scanner_accuracy cloud --cloud scan.ply --center x,y,z [--radius-mm 12.5] [--margin-mm 3]
 //          [--json out.json]
@@ -25,6 +30,10 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <numeric>
+#include <fstream>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <tuple>
 
 #include "cli_args.hpp"
@@ -33,6 +42,7 @@
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/eval/sim_scan.hpp"
 #include "cellsight/common/trajectory.hpp"
+#include "cellsight/scanner/scanner_config.hpp"
 
 using namespace cellsight;
 
@@ -42,6 +52,7 @@ namespace {
 struct Options {
   std::string scene, trajectories, trajectory = "demo_sweep", estimator = "centroid";
   std::string sphere_model = "sphere25", ply, json, cloud, a, b;
+  std::string frames, calibration, flange_truth, scanner_config = "config/scanner.yaml";
   bool no_noise = false, no_filter = false;
   LineExtractionConfig line;  // --centroid-floor, --background-percentile, --smoothing-degree
   int k = 5;
@@ -49,6 +60,13 @@ struct Options {
   double sphere_step_mm = 0.5, tolerance_m = 1e-6, radius_mm = 12.5, margin_mm = 3;
   std::vector<double> center;
 };
+
+Eigen::Isometry3d poseOfJson(const nlohmann::json& d) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(d.at("xyz")[0], d.at("xyz")[1], d.at("xyz")[2]);
+  T.linear() = Eigen::Quaterniond(d.at("quat")[3], d.at("quat")[0], d.at("quat")[1], d.at("quat")[2]).normalized().toRotationMatrix();
+  return T;
+}
 
 std::vector<Eigen::Vector3d> toDouble(const ScanCloud& c) {
   std::vector<Eigen::Vector3d> out;
@@ -185,9 +203,8 @@ int runSim(const Options& o) {
 
 // A scan made elsewhere (the ROS demo) against the scene's truth, plus, with --k, the
 // in-process K-orientation sphere scans for MPE_AL.
-int runScan(const Options& o) {
-  const Scene scene = loadScene(o.scene);
-  const ScanCloud cloud = loadCloud(o.cloud);
+/// Surface error against the scene's truth and MPE_P on the reference sphere in the cloud.
+nlohmann::json scanFigures(const Scene& scene, const ScanCloud& cloud, const std::string& sphere_model) {
   std::vector<Eigen::Vector3d> pts = toDouble(cloud);
   const SurfaceErrorStats e = SurfaceDistance(scene).stats(pts);
   nlohmann::json out;
@@ -197,7 +214,7 @@ int runScan(const Options& o) {
   out["surface_error_p99_mm"] = e.p99 * 1e3;
   out["surface_error_mean_mm"] = e.mean_abs * 1e3;
   for (const auto& obj : scene.objects) {
-    if (obj.model != o.sphere_model) continue;
+    if (obj.model != sphere_model) continue;
     const TriangleMesh mesh = loadValidMesh(obj.info.mesh_file);
     const Eigen::Vector3d center = obj.T_base_object * mesh.bounds().center().cast<double>();
     const double radius = 0.5 * mesh.bounds().sizes().x();
@@ -209,19 +226,166 @@ int runScan(const Options& o) {
     out["sphere_in_scan"] = sphereJson(f);
     out["mpe_p_mm"] = f.max_abs_dev * 1e3;
   }
+  return out;
+}
+
+int runScan(const Options& o) {
+  const Scene scene = loadScene(o.scene);
+  const ScanCloud cloud = loadCloud(o.cloud);
+  nlohmann::json out = scanFigures(scene, cloud, o.sphere_model);
   if (o.k_given) {
     Scene s = scene;
     LineExtractionConfig line;
     ScannerRenderer renderer(std::make_shared<CellGeometry>(s));
+    // the sweeps use the given calibration (default: the truth) with the robot as built
+    const ScannerCalibration cal =
+        o.calibration.empty() ? ScannerCalibration::fromScene(s) : ScannerCalibration::fromFolder(o.calibration);
+    const RobotErrorModel robot(s.as_built.robot);
     for (const auto& obj : s.objects) {
       if (obj.model != o.sphere_model) continue;
-      const SphereAcceptance acc = sphereAcceptance(renderer, obj, ScannerCalibration::fromScene(s), line, {},
-                                                    o.k, 0.5e-3, true);
+      const SphereAcceptance acc = sphereAcceptance(renderer, obj, cal, line, {}, o.k, 0.5e-3, true, &robot);
       out["mpe_al_mm"] = acc.mpe_al * 1e3;
       out["mpe_p_dedicated_sweep_mm"] = acc.mpe_p * 1e3;
       out["mpe_al_k"] = o.k;
       out["mpe_al_method"] = "K in-process sphere sweeps (same extraction and triangulation as the nodes), projector turned 360/K apart";
     }
+  }
+  std::cout << out.dump(2) << "\n";
+  if (!o.json.empty()) writeFileAtomic(o.json, out.dump(2) + "\n");
+  return 0;
+}
+
+/// A recorded scan (frames.json + PNGs of camera_trigger) triangulated again in-process with a
+/// given calibration, optionally with the flange poses the simulator knows to be true
+/// (frames_truth.jsonl, matched by stamp): the same extraction, triangulation, crop and
+/// outlier filter as the nodes (config/scanner.yaml).
+int runFrames(const Options& o) {
+  std::ifstream f(o.frames);
+  if (!f) throw std::runtime_error("cannot read --frames '" + o.frames + "'");
+  nlohmann::json frames;
+  try {
+    f >> frames;
+  } catch (const std::exception& e) {
+    throw std::runtime_error(o.frames + ": not valid JSON: " + e.what());
+  }
+  std::map<int64_t, Eigen::Isometry3d> true_flange;
+  if (!o.flange_truth.empty()) {
+    std::ifstream t(o.flange_truth);
+    if (!t) throw std::runtime_error("cannot read --flange-truth '" + o.flange_truth + "'");
+    std::string line;
+    while (std::getline(t, line)) {
+      if (line.empty()) continue;
+      const nlohmann::json j = nlohmann::json::parse(line);
+      true_flange[j.at("stamp_ns").get<int64_t>()] = poseOfJson(j.at("T_base_flange"));
+    }
+  }
+  const ScannerSettings settings = loadScannerSettings(o.scanner_config);
+  const ScannerCalibration cal = ScannerCalibration::fromFolder(o.calibration);
+  ScanCloud cloud;
+  cloud.frame_id = "base_link";
+  LineExtractionStats stats;
+  size_t used = 0;
+  for (const auto& fr : frames.at("frames")) {
+    const std::string img_path = resolveRelative(o.frames, fr.at("image").get<std::string>());
+    const cv::Mat img = cv::imread(img_path, cv::IMREAD_UNCHANGED);
+    if (img.empty()) throw std::runtime_error(img_path + ": cannot read the frame");
+    Eigen::Isometry3d T = poseOfJson(fr.at("T_base_flange"));
+    if (!o.flange_truth.empty()) {
+      const auto it = true_flange.find(fr.at("stamp_ns").get<int64_t>());
+      if (it == true_flange.end())
+        throw std::runtime_error(o.flange_truth + ": no true flange pose at the stamp of " + img_path);
+      T = it->second;
+    }
+    cv::Mat grey = img;
+    LineExtractionConfig line = settings.line;
+    if (img.channels() == 3) {
+      cv::cvtColor(img, grey, cv::COLOR_BGR2RGB);  // imread gives BGR; the extraction reads the red channel of RGB
+      if (line.channel < 0) line.channel = 0;
+    }
+    addProfile(grey, T, cal, line, settings.triangulation, cloud, &stats);
+    ++used;
+  }
+  if (settings.has_workspace) cloud = cropBox(cloud, settings.workspace);
+  if (settings.outlier_k > 0) cloud = statisticalOutlierRemoval(cloud, settings.outlier_k, settings.outlier_std);
+  if (!o.ply.empty()) saveCloud(o.ply, cloud);
+  nlohmann::json out = {{"frames", used}, {"calibration", o.calibration},
+                        {"flange_poses", o.flange_truth.empty() ? "as the robot reported them" : "the simulator's true poses"}};
+  if (!o.scene.empty()) {
+    const nlohmann::json fig = scanFigures(loadScene(o.scene), cloud, o.sphere_model);
+    out.update(fig);
+  } else {
+    out["points"] = cloud.size();
+  }
+  std::cout << out.dump(2) << "\n";
+  if (!o.json.empty()) writeFileAtomic(o.json, out.dump(2) + "\n");
+  return cloud.size() > 0 ? 0 : 1;
+}
+
+/// A calibration folder against the scene's truth (the cell as built), and the robot's own
+/// positioning error along a trajectory: the calibration and robot rows of the error budget.
+int runCalibration(const Options& o) {
+  const Scene scene = loadScene(o.scene);
+  const ScannerCalibration cal = ScannerCalibration::fromFolder(o.calibration);
+  const ScannerCalibration truth = ScannerCalibration::fromScene(scene);
+  constexpr double kDeg = M_PI / 180;
+  auto angle = [](const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+    return Eigen::AngleAxisd(a.transpose() * b).angle();
+  };
+  nlohmann::json out;
+  out["calibration"] = o.calibration;
+  out["intrinsics"] = {{"fx_error_px", cal.intrinsics.fx - truth.intrinsics.fx},
+                       {"fy_error_px", cal.intrinsics.fy - truth.intrinsics.fy},
+                       {"cx_error_px", cal.intrinsics.cx - truth.intrinsics.cx},
+                       {"cy_error_px", cal.intrinsics.cy - truth.intrinsics.cy}};
+  // where the intrinsics put the workspace's points: pixel error of the calibrated model against
+  // the true one for a grid of workspace points (camera pose from the truth)
+  double px_max = 0, px_sum2 = 0;
+  int n = 0;
+  const Eigen::Isometry3d T_cam_base = truth.T_base_camera.inverse();
+  for (int i = 0; i <= 8; ++i)
+    for (int j = 0; j <= 8; ++j) {
+      const Eigen::Vector3d p = scene.workspace.min() +
+                                Eigen::Vector3d(i / 8.0, j / 8.0, 0.5).cwiseProduct(scene.workspace.sizes());
+      const double d = (cal.intrinsics.project(T_cam_base * p) - truth.intrinsics.project(T_cam_base * p)).norm();
+      px_max = std::max(px_max, d);
+      px_sum2 += d * d;
+      ++n;
+    }
+  out["intrinsics"]["workspace_reprojection_rms_px"] = std::sqrt(px_sum2 / n);
+  out["intrinsics"]["workspace_reprojection_max_px"] = px_max;
+  out["camera_pose"] = {
+      {"position_error_mm", (cal.T_base_camera.translation() - truth.T_base_camera.translation()).norm() * 1e3},
+      {"rotation_error_deg", angle(cal.T_base_camera.linear(), truth.T_base_camera.linear()) / kDeg}};
+  // the light sheet in the flange frame: angle between the planes, and their distance along the
+  // true sheet's normal at a point 0.25 m down its central beam (the working distance)
+  const Plane est = laserPlane(cal.T_flange_laser), tru = laserPlane(truth.T_flange_laser);
+  const Eigen::Vector3d probe = truth.T_flange_laser * Eigen::Vector3d(0, 0, 0.25);
+  out["light_sheet"] = {{"angle_error_deg", std::acos(std::min(1.0, std::abs(est.n.dot(tru.n)))) / kDeg},
+                        {"offset_at_0.25m_mm", std::abs(est.distance(probe)) * 1e3}};
+  // the robot: where the flange really goes against where it is told, along the trajectory
+  const RobotErrorModel robot(scene.as_built.robot);
+  std::vector<double> err;
+  double rot_max = 0;
+  if (!o.trajectories.empty() && robot.enabled()) {
+    const Trajectory t = loadTrajectories(o.trajectories).at(o.trajectory);
+    for (const auto& P : t.poses) {
+      const Eigen::Isometry3d A = robot.actualSystematic(P);
+      err.push_back((A.translation() - P.translation()).norm() * 1e3);
+      rot_max = std::max(rot_max, angle(A.linear(), P.linear()) / kDeg);
+    }
+  }
+  if (!err.empty()) {
+    double s2 = 0;
+    for (double e : err) s2 += e * e;
+    out["robot"] = {{"trajectory", o.trajectory},
+                    {"absolute_position_error_rms_mm", std::sqrt(s2 / err.size())},
+                    {"absolute_position_error_max_mm", *std::max_element(err.begin(), err.end())},
+                    {"absolute_position_error_range_mm",
+                     *std::max_element(err.begin(), err.end()) - *std::min_element(err.begin(), err.end())},
+                    {"orientation_error_max_deg", rot_max},
+                    {"repeatability_sigma_mm", scene.as_built.robot.repeatability_mm}};
+  } else {
+    out["robot"] = {{"exact", true}};
   }
   std::cout << out.dump(2) << "\n";
   if (!o.json.empty()) writeFileAtomic(o.json, out.dump(2) + "\n");
@@ -319,6 +483,38 @@ int main(int argc, char** argv) {
   CLI::Option* scan_k = addCommon(c_scan, scan, "also K in-process sphere scans for MPE_AL (none without --k)");
   c_scan->add_option("--cloud", scan.cloud, "the scan (PLY, PCD)")->required()->check(CLI::ExistingFile);
 
+  c_scan->add_option("--calibration", scan.calibration,
+                     "calibration folder the K sphere sweeps use (default: the simulator's truth)")
+      ->check(CLI::ExistingDirectory);
+
+  Options frm;
+  CLI::App* c_frm = app.add_subcommand(
+      "frames", "a recorded scan (frames.json + PNGs) triangulated again in-process with a given calibration (and "
+                "optionally the true flange poses): the cloud, and its figures against --scene");
+  c_frm->add_option("--frames", frm.frames, "frames.json written by camera_trigger (~save_dir)")->required()->check(CLI::ExistingFile);
+  c_frm->add_option("--calibration", frm.calibration, "calibration folder (camera_info + transform YAMLs)")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  c_frm->add_option("--flange-truth", frm.flange_truth, "frames_truth.jsonl of the simulator: use its true flange poses");
+  c_frm->add_option("--scanner-config", frm.scanner_config, "line extraction, crop and filter settings")
+      ->check(CLI::ExistingFile)
+      ->capture_default_str();
+  c_frm->add_option("--scene", frm.scene, "scene YAML: also the figures against its truth")->check(CLI::ExistingFile);
+  c_frm->add_option("--sphere-model", frm.sphere_model, "reference sphere model id")->capture_default_str();
+  c_frm->add_option("--ply", frm.ply, "write the cloud here");
+  c_frm->add_option("--json", frm.json, "also write the JSON to this file");
+
+  Options cal;
+  CLI::App* c_cal = app.add_subcommand(
+      "calibration", "a calibration folder against the scene's truth (intrinsics, camera pose, light sheet) and the "
+                     "simulated robot's absolute error along a trajectory");
+  c_cal->add_option("--calibration", cal.calibration, "calibration folder")->required()->check(CLI::ExistingDirectory);
+  c_cal->add_option("--scene", cal.scene, "scene YAML (its as_built cell is the truth)")->required()->check(CLI::ExistingFile);
+  c_cal->add_option("--trajectories", cal.trajectories, "trajectories YAML: the robot's error along --trajectory")
+      ->check(CLI::ExistingFile);
+  c_cal->add_option("--trajectory", cal.trajectory, "trajectory name")->capture_default_str();
+  c_cal->add_option("--json", cal.json, "also write the JSON to this file");
+
   Options cmp;
   CLI::App* c_cmp = app.add_subcommand(
       "compare", "two clouds of the same scan (live, replayed): exit 0 when the counts match and every sorted point "
@@ -344,6 +540,8 @@ int main(int argc, char** argv) {
   return cellsight_tools::runTool([&] {
     if (c_sim->parsed()) return runSim(sim);
     if (c_scan->parsed()) return runScan(scan);
+    if (c_frm->parsed()) return runFrames(frm);
+    if (c_cal->parsed()) return runCalibration(cal);
     if (c_cmp->parsed()) return runCompare(cmp);
     return runCloud(cld);
   });

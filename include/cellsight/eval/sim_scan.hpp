@@ -4,11 +4,13 @@
 #pragma once
 #include <Eigen/Geometry>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "cellsight/scanner/accuracy.hpp"
 #include "cellsight/scanner/line_extraction.hpp"
 #include "cellsight/sim/renderer.hpp"
+#include "cellsight/sim/robot_model.hpp"
 #include "cellsight/common/scan_cloud.hpp"
 #include "cellsight/scanner/triangulation.hpp"
 
@@ -21,6 +23,11 @@ struct ScannerCalibration {
   Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
   std::shared_ptr<const UndistortionMap> undistortion;  ///< built on first use when empty
   static ScannerCalibration fromScene(const Scene& scene);
+  /// From a calibration folder (camera_info YAML + transform YAMLs, as calibration_publisher
+  /// loads it). Throws ConfigError naming what is missing.
+  static ScannerCalibration fromFolder(const std::string& dir, const std::string& camera_frame = "scanner_camera_optical",
+                                       const std::string& laser_frame = "laser",
+                                       const std::string& camera_name = "scanner_camera");
 };
 
 struct SimScanStats {
@@ -41,10 +48,13 @@ void addProfile(const cv::Mat& image, const Eigen::Isometry3d& T_base_flange,
                 const TriangulationConfig& tri, ScanCloud& cloud, LineExtractionStats* stats = nullptr,
                 bool auto_direction = true);
 
+/// Scans along `poses` (the poses the robot is told and reports; with `robot`, the frames are
+/// rendered where its flange really goes) and triangulates with `cal`.
 ScanCloud simulateScan(const ScannerRenderer& renderer,
                        const std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>>& poses,
                        const ScannerCalibration& cal, const LineExtractionConfig& line,
-                       const TriangulationConfig& tri, uint64_t seed, SimScanStats* stats = nullptr);
+                       const TriangulationConfig& tri, uint64_t seed, SimScanStats* stats = nullptr,
+                       const RobotErrorModel* robot = nullptr);
 
 /// Flange poses sweeping the light line across `target` (base frame) with the flange turned by
 /// `yaw` about the vertical from the robot's home orientation: the sheet's horizontal normal
@@ -67,6 +77,7 @@ struct SphereAcceptance {
 /// MPE_P and MPE_AL on a reference sphere object of the scene (K orientations 360°/K apart).
 SphereAcceptance sphereAcceptance(const ScannerRenderer& renderer, const SceneObject& sphere,
                                   const ScannerCalibration& cal, const LineExtractionConfig& line,
-                                  const TriangulationConfig& tri, int K, double step, bool filter);
+                                  const TriangulationConfig& tri, int K, double step, bool filter,
+                                  const RobotErrorModel* robot = nullptr);
 
 }  // namespace cellsight

@@ -8,6 +8,7 @@
 #include "cellsight/common/camera_model.hpp"
 #include "cellsight/common/mesh.hpp"
 #include "cellsight/common/model_info.hpp"
+#include "cellsight/sim/robot_model.hpp"
 
 namespace cellsight {
 
@@ -72,6 +73,23 @@ struct TableConfig {
   double reflectivity = 0.35;
 };
 
+/// How the built cell differs from its drawing (scene section `as_built`). The scene's camera
+/// and laser poses are the drawing; loadScene moves them by seeded draws of these sizes (σ per
+/// axis) unless `perfect`. Only the simulator and the evaluation see the result.
+struct AsBuiltConfig {
+  bool perfect = true;                  ///< true (or no section): the cell is its drawing, the robot exact
+  uint64_t seed = 1;
+  double camera_translation_mm = 0.0;   ///< scanner and fixture camera mounting
+  double camera_rotation_deg = 0.0;
+  double laser_translation_mm = 0.0;    ///< light-sheet projector on the flange
+  double laser_rotation_deg = 0.0;
+  RobotErrorConfig robot;               ///< enabled = !perfect
+  // the drawing, kept for makePerfect() and the reports
+  Eigen::Isometry3d drawn_scanner_camera = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d drawn_fixture_camera = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d drawn_laser = Eigen::Isometry3d::Identity();
+};
+
 struct Scene {
   std::string file;
   std::string name;
@@ -87,6 +105,7 @@ struct Scene {
   LaserConfig laser;
   NoiseConfig noise;
   RobotConfig robot;
+  AsBuiltConfig as_built;
 };
 
 struct SceneLoadOptions {
@@ -97,5 +116,8 @@ struct SceneLoadOptions {
 /// Loads and validates a scene file: unknown keys, missing meshes, invalid meshes, cameras
 /// that see none of the workspace → ConfigError naming the file and field.
 Scene loadScene(const std::string& path, const SceneLoadOptions& options = {});
+
+/// The ideal cell: camera and laser as drawn, the robot exact (the `perfect` switch).
+void makePerfect(Scene& scene);
 
 }  // namespace cellsight
