@@ -9,7 +9,7 @@ ROOT=$(cd "$(dirname "$0")/.." && pwd)
 source "$ROOT/scripts/ros-env.sh" "$BUILD"
 rm -rf "$WORK" && mkdir -p "$WORK/live"
 roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$WORK/live" trajectory:=quick_sweep \
-  calibration_dir:="$WORK/live/truth/calibration" scanner_camera_info:="" \
+  calibration_dir:="$WORK/live/truth/calibration" camera_info_from_calibration:=false \
   >"$WORK/live_launch.log" 2>&1 &
 LAUNCH_PID=$!
 for _ in $(seq 600); do
