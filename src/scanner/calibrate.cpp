@@ -68,13 +68,28 @@ DistortionModel parseDistortionModel(const std::string& name) {
 
 bool findChessboard(const cv::Mat& grey, const ChessboardSpec& board, std::vector<cv::Point2f>& corners) {
   corners.clear();
-  if (!cv::findChessboardCorners(grey, board.inner_corners, corners,
-                                 cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE)) {
-    return false;
+  // OpenCV's classic detector, on a copy of at most 0.4 MP: on a large image that shows only a
+  // part of a board it searches for minutes (158 s on a 2 MP frame), on the copy for about 2 s.
+  // Its corners are refined at full resolution.
+  const double scale = std::min(1.0, std::sqrt(0.4e6 / static_cast<double>(grey.total())));
+  cv::Mat small = grey;
+  if (scale < 1.0) cv::resize(grey, small, cv::Size(), scale, scale, cv::INTER_AREA);
+  if (cv::findChessboardCorners(small, board.inner_corners, corners,
+                                cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_FAST_CHECK)) {
+    if (scale < 1.0)
+      for (auto& c : corners) c = (c + cv::Point2f(0.5f, 0.5f)) * static_cast<float>(1.0 / scale) - cv::Point2f(0.5f, 0.5f);
+    cv::cornerSubPix(grey, corners, cv::Size(11, 11), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-4));
+    return true;
   }
-  cv::cornerSubPix(grey, corners, cv::Size(11, 11), cv::Size(-1, -1),
-                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-4));
-  return true;
+  // A board too small in the image for the copy: the sector-based detector at full resolution
+  // (bounded run time, sub-pixel corners of its own).
+  corners.clear();
+  if (scale < 1.0 &&
+      cv::findChessboardCornersSB(grey, board.inner_corners, corners, cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_ACCURACY))
+    return true;
+  corners.clear();
+  return false;
 }
 
 namespace {

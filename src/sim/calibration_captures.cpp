@@ -207,7 +207,7 @@ CalibrationCaptureFiles writeCalibrationCaptures(const Scene& scene, const std::
   // 1. Intrinsics: the board held in front of the camera, tilted 10-40 degrees, at 0-15 cm.
   int written = 0;
   for (int attempt = 0; written < c.intrinsic_views; ++attempt) {
-    if (attempt > 5000) throw std::runtime_error("calibration captures: cannot place the board in the camera's view");
+    if (attempt > 200000) throw std::runtime_error("calibration captures: cannot place the board in the camera's view");
     const Eigen::Vector2d px(cam.intrinsics.width * (0.2 + 0.6 * U(rng)), cam.intrinsics.height * (0.2 + 0.6 * U(rng)));
     const double h = scene.table.z + 0.15 * U(rng);
     const Eigen::Vector3d d = cam.T_base_camera.linear() * cam.intrinsics.pixelRay(px);

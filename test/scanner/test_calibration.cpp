@@ -6,8 +6,12 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "cellsight/scanner/calibrate.hpp"
+#include <functional>
+
+#include "cellsight/common/yaml_reader.hpp"
 #include "cellsight/eval/sim_scan.hpp"
+#include "cellsight/scanner/calibrate.hpp"
+#include "cellsight/sim/calibration_captures.hpp"
 #include "sim/sim_test_scenes.hpp"
 
 using namespace cellsight;
@@ -166,4 +170,82 @@ TEST(Calibration, LaserSheetThreePointPlateAndGaugeBlock) {
   const Plane truth = laserPlane(s.laser.T_flange_laser);
   std::printf("sheet three-point: angle error %.4f deg\n", angleBetweenPlanes(res.plane_flange, truth) * 180 / M_PI);
   EXPECT_LT(angleBetweenPlanes(res.plane_flange, truth), 0.2 * M_PI / 180);
+}
+
+// The whole calibration a user makes, on simulated captures of the demo cell as built (its
+// camera and laser off their drawing, its robot with kinematic error): each result against the
+// truth the pipeline never sees.
+TEST(SelfCalibration, SimulatedCapturesOfTheCellAsBuilt) {
+  const std::string dir = cellsight_test::tempDir();
+  const Scene scene = loadScene(std::string(CELLSIGHT_SOURCE_DIR) + "/config/scenes/demo.yaml");
+  ASSERT_FALSE(scene.as_built.perfect);
+  CalibrationCaptureConfig cc;
+  cc.intrinsic_views = 10;
+  cc.laser_views = 8;
+  const CalibrationCaptureFiles f = writeCalibrationCaptures(scene, dir, cc);
+  const ChessboardSpec board{{cc.board_cols, cc.board_rows}, cc.square};
+  const IntrinsicsResult in = calibrateIntrinsics(listImages({f.intrinsics_dir}), board, DistortionModel::kFull);
+  ASSERT_EQ(in.used.size(), 10u);
+  const CameraIntrinsics& K = scene.scanner_camera.intrinsics;
+  EXPECT_LT(in.rms_px, 0.3);
+  EXPECT_NEAR(in.camera.fx, K.fx, 0.005 * K.fx);
+  EXPECT_NEAR(in.camera.cx, K.cx, 3.0);
+
+  YamlMap t(loadYamlFile(f.taught), f.taught);
+  const Eigen::Isometry3d T_base_pattern = frameFromThreePoints(t.getVector3("origin"), t.getVector3("on_x"), t.getVector3("in_xy"));
+  const ExtrinsicsResult ex = calibrateExtrinsics(cv::imread(f.pattern_image, cv::IMREAD_GRAYSCALE), board, in.camera, T_base_pattern);
+  const Eigen::Isometry3d& Tc = scene.scanner_camera.T_base_camera;
+  const double cam_pos = (ex.T_base_camera.translation() - Tc.translation()).norm();
+  const double cam_rot = Eigen::AngleAxisd(ex.T_base_camera.linear().transpose() * Tc.linear()).angle();
+  EXPECT_LT(cam_pos, 2e-3);  // taught with a robot that errs by a few tenths of a mm
+  EXPECT_LT(cam_rot, 0.2 * M_PI / 180);
+
+  const auto obs = loadLaserObservations(f.laser_obs);
+  const LaserCalibrationResult lsq = calibrateLaserLeastSquares(obs, in.camera, ex.T_base_camera, {});
+  const Plane truth = laserPlane(scene.laser.T_flange_laser);
+  const Eigen::Vector3d probe = scene.laser.T_flange_laser * Eigen::Vector3d(0, 0, 0.25);
+  const auto three = loadLaserObservations(f.three_point_obs);
+  const LaserCalibrationResult tp = calibrateLaserThreePoint(three.front(), in.camera, ex.T_base_camera, {});
+  std::printf("self-calibration: fx %.2f (true %.2f), camera %.3f mm %.4f deg, sheet LSQ %.4f deg %.4f mm, "
+              "three-point %.4f deg %.4f mm\n",
+              in.camera.fx, K.fx, cam_pos * 1e3, cam_rot * 180 / M_PI, angleBetweenPlanes(lsq.plane_flange, truth) * 180 / M_PI,
+              std::abs(lsq.plane_flange.distance(probe)) * 1e3, angleBetweenPlanes(tp.plane_flange, truth) * 180 / M_PI,
+              std::abs(tp.plane_flange.distance(probe)) * 1e3);
+  EXPECT_LT(angleBetweenPlanes(lsq.plane_flange, truth), 0.1 * M_PI / 180);
+  EXPECT_LT(std::abs(lsq.plane_flange.distance(probe)), 0.3e-3);
+  EXPECT_LT(angleBetweenPlanes(tp.plane_flange, truth), 0.5 * M_PI / 180);
+}
+
+TEST(SelfCalibration, BadCapturesAreRefusedWithTheirCause) {
+  const Scene scene = loadScene(std::string(CELLSIGHT_SOURCE_DIR) + "/config/scenes/demo.yaml");
+  CalibrationCaptureConfig cc;
+  const ChessboardSpec board{{cc.board_cols, cc.board_rows}, cc.square};
+  const CameraIntrinsics& K = scene.scanner_camera.intrinsics;
+  auto message = [](const std::function<void()>& f) {
+    try {
+      f();
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string("(no error)");
+  };
+  // no pattern in the image (the bare table)
+  cv::Mat table(K.height, K.width, CV_8UC1, cv::Scalar(100));
+  EXPECT_NE(message([&] { calibrateExtrinsics(table, board, K, Eigen::Isometry3d::Identity()); }).find("not found"),
+            std::string::npos);
+  // the board half out of view: its centre on the image's right edge
+  const CameraConfig& cam = scene.scanner_camera;
+  const Eigen::Vector3d d = cam.T_base_camera.linear() * K.pixelRay(Eigen::Vector2d(K.width - 1, K.height / 2.0));
+  const Eigen::Vector3d edge = cam.T_base_camera.translation() - cam.T_base_camera.translation().z() / d.z() * d;
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  T.translation() = edge - T.linear() * Eigen::Vector3d(0.1, 0.0625, 0);
+  const cv::Mat half = renderChessboardView(scene, cam, T, cc, 1);
+  EXPECT_NE(message([&] { calibrateExtrinsics(half, board, K, T); }).find("whole board in view"), std::string::npos);
+  // a board that looks the same after a half turn gives no unique frame
+  EXPECT_NE(message([&] { calibrateExtrinsics(half, ChessboardSpec{{8, 6}, 0.025}, K, T); }).find("half turn"),
+            std::string::npos);
+  // too few views for the intrinsics
+  EXPECT_NE(message([&] { calibrateIntrinsics({{"a", half}, {"b", table}}, board, DistortionModel::kFull); }).find("at least 3 views"),
+            std::string::npos);
 }
