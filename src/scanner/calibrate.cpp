@@ -5,6 +5,7 @@
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <cstdio>
 #include <stdexcept>
 
 #include "cellsight/common/file_io.hpp"
@@ -262,9 +263,17 @@ LaserCalibrationResult fitSheet(const std::vector<Eigen::Vector3d>& pts_flange) 
   const Eigen::Vector3d sv = svd.singularValues();
   LaserCalibrationResult r;
   r.spread_ratio = sv(0) > 0 ? sv(1) / sv(0) : 0;
-  if (r.spread_ratio < 1e-3) {
-    throw std::runtime_error("laser calibration: the observed points lie on one line; observe the sheet on "
-                             "surfaces at different heights or from different robot poses");
+  // Across the line, the points must spread by millimetres, not by noise: views that only move
+  // the flange parallel to the surface (same height, same orientation) all see the same line of
+  // the sheet and leave its tilt about that line unknown.
+  const double across_mm = sv(1) / std::sqrt(static_cast<double>(pts_flange.size())) * 1e3;
+  if (r.spread_ratio < 1e-3 || across_mm < 2.0) {
+    char buf[64];
+    std::snprintf(buf, sizeof(buf), "%.3f mm", across_mm);
+    throw std::runtime_error(std::string("laser calibration: the observed points lie on one line in the flange frame "
+                                         "(spread across it ") + buf +
+                             "): the views differ only by moves parallel to the surface; observe the sheet from "
+                             "different flange heights or tilts, or on surfaces at different heights");
   }
   r.plane_flange.n = svd.matrixV().col(2).normalized();
   r.plane_flange.d = -r.plane_flange.n.dot(mean);

@@ -151,6 +151,18 @@ TEST(Calibration, LaserSheetLeastSquaresRecoversTheSimulatedSheet) {
   // One pose over one plate: all points on one line → refused, not a silent wrong answer.
   EXPECT_THROW(calibrateLaserLeastSquares({obs[0]}, s.scanner_camera.intrinsics, s.scanner_camera.T_base_camera, {}),
                std::runtime_error);
+  // Degenerate robot poses: all parallel at one height, moved along the surface only.
+  std::vector<LaserObservation> parallel;
+  for (int i = 0; i < 4; ++i) {
+    const Eigen::Isometry3d F = cellsight_test::lookDown({0.015 * i, -0.12 + 0.01 * i, 0.25});
+    parallel.push_back({r.render(F, 30 + i), F, 0.0, 0.0});
+  }
+  try {
+    calibrateLaserLeastSquares(parallel, s.scanner_camera.intrinsics, s.scanner_camera.T_base_camera, {});
+    ADD_FAILURE() << "parallel poses at one height were accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("flange heights or tilts"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Calibration, LaserSheetThreePointPlateAndGaugeBlock) {
