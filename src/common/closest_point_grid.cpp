@@ -1,5 +1,7 @@
 #include "cellsight/common/closest_point_grid.hpp"
 
+#include "cellsight/common/binary_io.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -109,6 +111,43 @@ ClosestPoint ClosestPointGrid::closestPoint(const Eigen::Vector3f& p, float max_
     best.normal = normals_[candidates_[i]];
   }
   return best;
+}
+
+void ClosestPointGrid::write(BinaryWriter& w) const {
+  w.pod(cell_);
+  w.pod(inv_cell_);
+  w.pod(margin_);
+  w.pod(origin_);
+  for (int d : dims_) w.pod(d);
+  w.vec(vertices_);
+  w.vec(faces_);
+  w.vec(face_ids_);
+  w.vec(normals_);
+  w.vec(offsets_);
+  w.vec(candidates_);
+}
+
+ClosestPointGrid ClosestPointGrid::read(BinaryReader& r) {
+  ClosestPointGrid g;
+  g.cell_ = r.pod<float>();
+  g.inv_cell_ = r.pod<float>();
+  g.margin_ = r.pod<float>();
+  g.origin_ = r.pod<Eigen::Vector3f>();
+  for (int& d : g.dims_) d = r.pod<int>();
+  g.vertices_ = r.vec<Eigen::Vector3d>();
+  g.faces_ = r.vec<Eigen::Vector3i>();
+  g.face_ids_ = r.vec<int>();
+  g.normals_ = r.vec<Eigen::Vector3f>();
+  g.offsets_ = r.vec<uint32_t>();
+  g.candidates_ = r.vec<uint32_t>();
+  const size_t cells = static_cast<size_t>(g.dims_[0]) * g.dims_[1] * g.dims_[2];
+  if (!g.faces_.empty() && g.offsets_.size() != cells + 1) throw std::runtime_error("closest point grid record: inconsistent");
+  for (uint32_t c : g.candidates_)
+    if (c >= g.faces_.size()) throw std::runtime_error("closest point grid record: triangle index out of range");
+  for (const auto& f : g.faces_)
+    if ((f.array() < 0).any() || (f.array() >= static_cast<int>(g.vertices_.size())).any())
+      throw std::runtime_error("closest point grid record: vertex index out of range");
+  return g;
 }
 
 }  // namespace cellsight

@@ -20,6 +20,7 @@
 #include <map>
 #include <exception>
 #include <mutex>
+#include <cstdlib>
 #include <thread>
 #include <nlohmann/json.hpp>
 
@@ -56,6 +57,16 @@ class ModelMatching {
       for (const auto& w : library_->model(id).warnings) ROS_WARN("model_matching: model '%s': %s", id.c_str(), w.c_str());
     }
     config_ = cellsight::loadMatchingConfig(settings);
+    // prepared models are kept on disk (keyed by geometry and settings): a restart loads them
+    std::string cache_dir;
+    cellsight_ros::param(pnh, "model_cache_dir", cache_dir);
+    if (cache_dir.empty()) {
+      const char* ros_home = std::getenv("ROS_HOME");
+      const char* home = std::getenv("HOME");
+      if (ros_home && *ros_home) cache_dir = std::string(ros_home) + "/cellsight/model_cache";
+      else if (home && *home) cache_dir = std::string(home) + "/.ros/cellsight/model_cache";
+    }
+    if (cache_dir != "none") config_.model_cache_dir = cache_dir;
     // the viewpoint comes per scan from tf; build the per-model data now, not on the first scan
     matcher_ = std::make_unique<cellsight::ModelMatcher>(library_, config_);
     const ros::WallTime t0 = ros::WallTime::now();
@@ -72,8 +83,9 @@ class ModelMatching {
       }
     }).join();
     if (failure) std::rethrow_exception(failure);
-    ROS_INFO("model_matching: %zu models ready in %.2f s (coarse stage: %s)", library_->ids().size(),
-             (ros::WallTime::now() - t0).toSec(), config_.coarse.c_str());
+    ROS_INFO("model_matching: %zu models ready in %.2f s (coarse stage: %s; prepared models cached in %s)",
+             library_->ids().size(), (ros::WallTime::now() - t0).toSec(), config_.coarse.c_str(),
+             config_.model_cache_dir.empty() ? "no folder" : config_.model_cache_dir.c_str());
     detections_pub_ = nh.advertise<cellsight::DetectionArray>("detections", 1, true);
     markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("detections/markers", 1, true);
     clusters_sub_ = nh.subscribe("clusters", 1, &ModelMatching::onClusters, this);

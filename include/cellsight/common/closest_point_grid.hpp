@@ -18,6 +18,9 @@
 
 namespace cellsight {
 
+class BinaryWriter;
+class BinaryReader;
+
 class ClosestPointGrid {
  public:
   ClosestPointGrid() = default;
@@ -32,6 +35,10 @@ class ClosestPointGrid {
   /// RayCaster::closestPoint). *covered = false when p lies in no listed cell: then nothing is
   /// within `margin` of p, and the answer is exact only if max_distance <= margin.
   ClosestPoint closestPoint(const Eigen::Vector3f& p, float max_distance, bool* covered = nullptr) const;
+
+  /// The grid as a flat record (model-preparation cache) and back.
+  void write(BinaryWriter& w) const;
+  static ClosestPointGrid read(BinaryReader& r);
 
  private:
   float cell_ = 0, inv_cell_ = 0, margin_ = 0;

@@ -96,6 +96,10 @@ struct MatchingConfig {
   double max_cluster_points = 300000;
   int threads = 0;                 ///< 0: hardware concurrency
   uint64_t seed = 42;
+  /// Folder of prepared models (sampled clouds, descriptors, PPF table, distance field, closest-
+  /// point grid), one file per model keyed by its geometry and the settings that shape it; a
+  /// model found there is loaded instead of prepared. Empty: no cache.
+  std::string model_cache_dir;
 };
 
 struct PartDetection {
@@ -187,6 +191,11 @@ class ModelMatcher {
 
  private:
   std::shared_ptr<const ModelIndex> index(const std::string& id) const;
+  /// The model-preparation cache (config.model_cache_dir): file of a model, load (false when
+  /// missing, stale or unreadable: then prepared and saved again), save (atomic).
+  std::string cacheFile(const ModelEntry& e, const std::string& id) const;
+  bool loadIndex(const std::string& file, const ModelEntry& e, ModelIndex& m) const;
+  void saveIndex(const std::string& file, const ModelIndex& m) const;
 
   std::shared_ptr<const ModelLibrary> library_;
   MatchingConfig config_;

@@ -125,6 +125,20 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
   auto m = std::make_shared<ModelIndex>();
   m->id = id;
   m->info = e.info;
+  const std::string cache = config_.model_cache_dir.empty() ? std::string() : cacheFile(e, id);
+  if (!cache.empty() && loadIndex(cache, e, *m)) {
+    // stored: everything but the search trees and the ray caster, rebuilt here
+    if (!m->fpfh_valid.empty()) {
+      std::vector<Fpfh> valid;
+      for (int i : m->fpfh_valid) valid.push_back(m->fpfh[static_cast<size_t>(i)]);
+      m->fpfh_tree.setInputCloud(toPclFpfh(valid));
+    }
+    m->fine_tree.setInputCloud(toXyz(m->fine->points));
+    if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
+    m->caster.commit();
+    std::lock_guard<std::mutex> lock(mutex_);
+    return indices_.emplace(id, m).first->second;
+  }
   m->fine = library_->cloud(id, config_.icp_spacing);
   {
     // Descriptors see the model as a scan sees it: PCA normals over normal_radius (not the
@@ -216,6 +230,13 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
     // margin: the polish's smallest correspondence distance and a cell (farther points are
     // rare in the polish: the RayCaster answers them)
     m->closest = ClosestPointGrid(e.mesh, cell, dmin + cell);
+  }
+  if (!cache.empty()) {
+    try {
+      saveIndex(cache, *m);
+    } catch (const std::exception&) {
+      // an unwritable cache costs time on the next start, nothing else
+    }
   }
   std::lock_guard<std::mutex> lock(mutex_);
   return indices_.emplace(id, m).first->second;
