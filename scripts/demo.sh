@@ -51,18 +51,7 @@ run_step() {
 tc0=$(now)
 run_step captures "$TOOLS/cellsight_simulate_captures" --scene "$SCENE" --out "$OUT/captures"
 CAL="$OUT/calibration"
-BOARD=(--board 9x6 --square 0.025)
-run_step intrinsics "$TOOLS/cellsight_calibrate" intrinsics --images "$OUT/captures/intrinsics" "${BOARD[@]}" \
-  --out "$CAL/scanner_camera.yaml"
-run_step extrinsics "$TOOLS/cellsight_calibrate" extrinsics --camera "$CAL/scanner_camera.yaml" \
-  --image "$OUT/captures/extrinsics/pattern.png" "${BOARD[@]}" --taught "$OUT/captures/extrinsics/taught.yaml" \
-  --out "$CAL/scanner_camera_pose.yaml"
-run_step light_sheet "$TOOLS/cellsight_calibrate" laser --camera "$CAL/scanner_camera.yaml" \
-  --camera-pose "$CAL/scanner_camera_pose.yaml" --observations "$OUT/captures/laser/observations.yaml" \
-  --out "$CAL/laser.yaml"
-run_step light_sheet_three_point "$TOOLS/cellsight_calibrate" laser --method three_point \
-  --camera "$CAL/scanner_camera.yaml" --camera-pose "$CAL/scanner_camera_pose.yaml" \
-  --observations "$OUT/captures/laser_three_point/observations.yaml" --out "$OUT/calibration_three_point/laser.yaml"
+run_step calibration bash scripts/calibrate-captures.sh "$TOOLS" "$OUT/captures" "$CAL" "$OUT/calibration_three_point"
 tc1=$(now)
 echo "demo: calibrated the cell in $(/usr/bin/python3 -c "print(round($tc1 - $tc0, 1))") s: $CAL"
 

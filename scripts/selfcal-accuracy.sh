@@ -27,14 +27,8 @@ SCENE="$ROOT/config/scenes/demo.yaml"
 rm -rf "$WORK"
 mkdir -p "$WORK"
 CAL="$WORK/calibration"
-BOARD=(--board 9x6 --square 0.025)
 "$TOOLS/cellsight_simulate_captures" --scene "$SCENE" --out "$WORK/captures" --seed "$CAPTURE_SEED" >"$WORK/captures.json"
-"$TOOLS/cellsight_calibrate" intrinsics --images "$WORK/captures/intrinsics" "${BOARD[@]}" \
-  --out "$CAL/scanner_camera.yaml" >"$WORK/intrinsics.json"
-"$TOOLS/cellsight_calibrate" extrinsics --camera "$CAL/scanner_camera.yaml" --image "$WORK/captures/extrinsics/pattern.png" \
-  "${BOARD[@]}" --taught "$WORK/captures/extrinsics/taught.yaml" --out "$CAL/scanner_camera_pose.yaml" >"$WORK/extrinsics.json"
-"$TOOLS/cellsight_calibrate" laser --camera "$CAL/scanner_camera.yaml" --camera-pose "$CAL/scanner_camera_pose.yaml" \
-  --observations "$WORK/captures/laser/observations.yaml" --out "$CAL/laser.yaml" >"$WORK/laser.json"
+bash "$ROOT/scripts/calibrate-captures.sh" "$TOOLS" "$WORK/captures" "$CAL"
 if [ "$LASER_ERROR_MM" != 0 ]; then
   # the sheet is the plane y = 0 of the laser frame: move the frame along its own y axis
   /usr/bin/python3 - "$CAL/laser.yaml" "$LASER_ERROR_MM" <<'PY'

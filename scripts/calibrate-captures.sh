@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# The scanner's calibration from a folder of captures laid out as cellsight_simulate_captures
+# writes it (or a real cell's, laid out alike): intrinsics, camera pose, light sheet by least
+# squares into CAL/, the thesis's three-point light sheet into THREE_POINT/ if given. Each step's
+# JSON goes to CAL/../logs/calibrate_<step>.json; a failing step stops with its cause.
+# Usage: calibrate-captures.sh TOOLS_DIR CAPTURES CAL [THREE_POINT_DIR] [--board 9x6 --square 0.025]
+set -uo pipefail
+TOOLS=$1
+CAP=$2
+CAL=$3
+shift 3
+THREE=""
+if [ $# -gt 0 ] && [ "${1#--}" = "$1" ]; then THREE=$1; shift; fi
+BOARD=(--board 9x6 --square 0.025)
+[ $# -gt 0 ] && BOARD=("$@")
+LOGS="$(dirname "$CAL")/logs"
+mkdir -p "$LOGS"
+step() {
+  local name=$1
+  shift
+  if ! "$TOOLS/cellsight_calibrate" "$@" >"$LOGS/calibrate_$name.json" 2>"$LOGS/calibrate_$name.log"; then
+    echo "calibration step '$name' failed: $(grep -v '^\s*$' "$LOGS/calibrate_$name.log" | tail -1)" >&2
+    exit 1
+  fi
+}
+step intrinsics intrinsics --images "$CAP/intrinsics" "${BOARD[@]}" --out "$CAL/scanner_camera.yaml"
+step extrinsics extrinsics --camera "$CAL/scanner_camera.yaml" --image "$CAP/extrinsics/pattern.png" "${BOARD[@]}" \
+  --taught "$CAP/extrinsics/taught.yaml" --out "$CAL/scanner_camera_pose.yaml"
+step light_sheet laser --camera "$CAL/scanner_camera.yaml" --camera-pose "$CAL/scanner_camera_pose.yaml" \
+  --observations "$CAP/laser/observations.yaml" --out "$CAL/laser.yaml"
+if [ -n "$THREE" ]; then
+  step light_sheet_three_point laser --method three_point --camera "$CAL/scanner_camera.yaml" \
+    --camera-pose "$CAL/scanner_camera_pose.yaml" --observations "$CAP/laser_three_point/observations.yaml" \
+    --out "$THREE/laser.yaml"
+fi
