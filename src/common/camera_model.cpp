@@ -52,6 +52,13 @@ Eigen::Vector3d CameraIntrinsics::pixelRay(const Eigen::Vector2d& pixel) const {
 
 void CameraIntrinsics::validate(const std::string& where) const {
   if (width <= 0 || height <= 0) throw ConfigError(where + ": image size must be positive");
+  // a bound on what one image may cost (undistortion maps, frames): sides and pixels
+  if (width > kMaxImageSide || height > kMaxImageSide ||
+      static_cast<int64_t>(width) * height > kMaxImagePixels) {
+    throw ConfigError(where + ": image size " + std::to_string(width) + "x" + std::to_string(height) +
+                      " is over the limit of " + std::to_string(kMaxImageSide) + " px a side and " +
+                      std::to_string(kMaxImagePixels / 1000000) + " MP");
+  }
   if (!(fx > 0) || !(fy > 0)) throw ConfigError(where + ": focal lengths must be positive");
   if (!std::isfinite(cx) || !std::isfinite(cy)) {
     throw ConfigError(where + ": principal point must be finite");

@@ -29,7 +29,9 @@ std::map<std::string, Trajectory> loadTrajectories(const std::string& path) {
     Trajectory t;
     if (type == "linear") {
       const int steps = m.getInt("steps");
-      if (steps < 2) m.fail("steps", "a linear trajectory needs at least 2 steps");
+      if (steps < 2 || steps > kMaxTrajectorySteps)
+        m.fail("steps", "a linear trajectory needs 2 to " + std::to_string(kMaxTrajectorySteps) + " steps (got " +
+                            std::to_string(steps) + ")");
       t = linearTrajectory(m.getPose("start"), m.getPose("end"), steps);
     } else if (type == "rotation") {
       const Eigen::Isometry3d start = m.getPose("start");
@@ -39,7 +41,9 @@ std::map<std::string, Trajectory> loadTrajectories(const std::string& path) {
       axis.normalize();
       const double a0 = m.getDouble("angle_from"), a1 = m.getDouble("angle_to");
       const int steps = m.getInt("steps");
-      if (steps < 2) m.fail("steps", "a rotation trajectory needs at least 2 steps");
+      if (steps < 2 || steps > kMaxTrajectorySteps)
+        m.fail("steps", "a rotation trajectory needs 2 to " + std::to_string(kMaxTrajectorySteps) + " steps (got " +
+                            std::to_string(steps) + ")");
       for (int i = 0; i < steps; ++i) {
         const double a = a0 + (a1 - a0) * i / (steps - 1);
         const Eigen::Isometry3d R = Eigen::Translation3d(pivot) * Eigen::AngleAxisd(a, axis) *

@@ -4,6 +4,7 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 namespace cellsight_ros {
@@ -187,39 +188,62 @@ sensor_msgs::PointCloud2 toCloudMsg(const cellsight::ScanCloud& c, const ros::Ti
 }
 
 cellsight::ScanCloud fromCloudMsg(const sensor_msgs::PointCloud2& m, size_t* dropped) {
-  auto has = [&](const std::string& name) {
-    for (const auto& f : m.fields)
-      if (f.name == name) return f.datatype == sensor_msgs::PointField::FLOAT32;
-    return false;
+  // Every size and offset is checked in 64 bits against the bytes the message holds before a
+  // point is read: a malformed message costs an error, never a crash or a huge allocation.
+  auto offsetOf = [&](const std::string& name, bool required) -> int64_t {
+    for (const auto& f : m.fields) {
+      if (f.name != name) continue;
+      if (f.datatype != sensor_msgs::PointField::FLOAT32 || f.count > 1) {
+        if (required) throw std::invalid_argument("PointCloud2 field '" + name + "' must be one float32");
+        return -1;
+      }
+      if (static_cast<uint64_t>(f.offset) + 4 > m.point_step) {
+        throw std::invalid_argument("PointCloud2 field '" + name + "' at offset " + std::to_string(f.offset) +
+                                    " lies past point_step " + std::to_string(m.point_step));
+      }
+      return f.offset;
+    }
+    if (required) throw std::invalid_argument(std::string("PointCloud2 has no float32 field '") + name + "'");
+    return -1;
   };
-  for (const char* f : {"x", "y", "z"}) {
-    if (!has(f)) throw std::invalid_argument(std::string("PointCloud2 has no float32 field '") + f + "'");
+  const int64_t ox = offsetOf("x", true), oy = offsetOf("y", true), oz = offsetOf("z", true);
+  const int64_t oi = offsetOf("intensity", false);
+  const int64_t onx = offsetOf("normal_x", false), ony = offsetOf("normal_y", false), onz = offsetOf("normal_z", false);
+  const bool normals = onx >= 0 && ony >= 0 && onz >= 0;
+  if (m.point_step < 12) throw std::invalid_argument("PointCloud2 point_step " + std::to_string(m.point_step) + " < 12");
+  if (static_cast<uint64_t>(m.point_step) * m.width > m.row_step ||
+      static_cast<uint64_t>(m.row_step) * m.height > m.data.size()) {
+    throw std::invalid_argument("PointCloud2 data (" + std::to_string(m.data.size()) + " bytes) is shorter than width " +
+                                std::to_string(m.width) + " x height " + std::to_string(m.height) + " x point_step " +
+                                std::to_string(m.point_step) + " (row_step " + std::to_string(m.row_step) + ")");
   }
-  if (static_cast<size_t>(m.row_step) * m.height > m.data.size() || m.point_step * m.width > m.row_step) {
-    throw std::invalid_argument("PointCloud2 data is shorter than width x height x point_step");
-  }
+  const uint16_t probe = 1;
+  const bool little = *reinterpret_cast<const uint8_t*>(&probe) == 1;
+  if (m.is_bigendian == little) throw std::invalid_argument("PointCloud2 byte order differs from this machine's");
   cellsight::ScanCloud c;
   c.frame_id = m.header.frame_id;
-  const bool intensity = has("intensity"), normals = has("normal_x") && has("normal_y") && has("normal_z");
-  sensor_msgs::PointCloud2ConstIterator<float> x(m, "x");
-  std::unique_ptr<sensor_msgs::PointCloud2ConstIterator<float>> it, nt;
-  if (intensity) it.reset(new sensor_msgs::PointCloud2ConstIterator<float>(m, "intensity"));
-  if (normals) nt.reset(new sensor_msgs::PointCloud2ConstIterator<float>(m, "normal_x"));
+  const size_t n = static_cast<size_t>(m.width) * m.height;  // ≤ data.size() / 12 after the checks
+  c.points.reserve(n);
+  c.intensity.reserve(n);
+  if (normals) c.normals.reserve(n);
+  auto at = [&](const uint8_t* base, int64_t off) {
+    float v;
+    std::memcpy(&v, base + off, sizeof(float));
+    return v;
+  };
   size_t bad = 0;
-  const size_t n = static_cast<size_t>(m.width) * m.height;
-  for (size_t k = 0; k < n; ++k, ++x) {
-    const Eigen::Vector3f p(x[0], x[1], x[2]);
-    const float i = intensity ? **it : 0.f;
-    Eigen::Vector3f nn = Eigen::Vector3f::Zero();
-    if (normals) nn = Eigen::Vector3f((*nt)[0], (*nt)[1], (*nt)[2]);
-    if (intensity) ++(*it);
-    if (normals) ++(*nt);
-    if (!p.allFinite()) {
-      ++bad;
-      continue;
+  for (uint32_t r = 0; r < m.height; ++r) {
+    const uint8_t* row = m.data.data() + static_cast<size_t>(r) * m.row_step;
+    for (uint32_t k = 0; k < m.width; ++k) {
+      const uint8_t* p = row + static_cast<size_t>(k) * m.point_step;
+      const Eigen::Vector3f xyz(at(p, ox), at(p, oy), at(p, oz));
+      if (!xyz.allFinite()) {
+        ++bad;
+        continue;
+      }
+      c.append(xyz, oi >= 0 ? at(p, oi) : 0.f);
+      if (normals) c.normals.emplace_back(at(p, onx), at(p, ony), at(p, onz));
     }
-    c.append(p, i);
-    if (normals) c.normals.push_back(nn);
   }
   if (dropped) *dropped = bad;
   return c;

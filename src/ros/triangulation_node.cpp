@@ -97,7 +97,12 @@ class Triangulation {
         map_->camera().cy == K.cy && map_->camera().dist == K.dist && map_->camera().width == K.width &&
         map_->camera().height == K.height)
       return;
-    map_ = std::make_shared<cellsight::UndistortionMap>(K);
+    try {
+      map_ = std::make_shared<cellsight::UndistortionMap>(K);
+    } catch (const std::exception& e) {  // std::bad_alloc included: the node keeps its old map
+      ROS_ERROR_THROTTLE(5.0, "triangulation: cannot build the undistortion map for %dx%d: %s", K.width, K.height, e.what());
+      return;
+    }
     ROS_INFO("triangulation: camera intrinsics %dx%d fx %.1f from camera_info", K.width, K.height, K.fx);
     // frames that came before the first camera_info (the camera publishes both at once, but
     // the two topics race at start-up) are processed now rather than lost

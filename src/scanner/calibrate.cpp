@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "cellsight/common/file_io.hpp"
+#include "cellsight/common/image_io.hpp"
 #include "cellsight/scanner/triangulation.hpp"
 #include "cellsight/common/yaml_reader.hpp"
 
@@ -24,8 +25,11 @@ std::vector<LaserObservation> loadLaserObservations(const std::string& path) {
   for (const YamlMap& m : root.getMapList("observations")) {
     LaserObservation o;
     const std::string img = resolveRelative(path, m.getString("image"));
-    o.image = cv::imread(img, cv::IMREAD_GRAYSCALE);
-    if (o.image.empty()) m.fail("image", "cannot read " + img);
+    try {
+      o.image = readImage(img, cv::IMREAD_GRAYSCALE);
+    } catch (const std::exception& e) {
+      m.fail("image", e.what());
+    }
     o.T_base_flange = m.getPose("flange_pose");
     o.plane_z = m.getDouble("plane_z", 0.0);
     o.block_z = m.getDouble("block_z", 0.0);
@@ -109,7 +113,15 @@ IntrinsicsResult calibrateIntrinsics(const std::vector<std::string>& files, cons
                                      DistortionModel model, bool fix_aspect_ratio) {
   std::vector<std::pair<std::string, cv::Mat>> views;
   views.reserve(files.size());
-  for (const auto& f : files) views.emplace_back(f, cv::imread(f, cv::IMREAD_GRAYSCALE));
+  for (const auto& f : files) {
+    cv::Mat img;
+    try {
+      img = readImage(f, cv::IMREAD_GRAYSCALE);
+    } catch (const std::exception&) {
+      // reported as unreadable with the rejected views (an empty image)
+    }
+    views.emplace_back(f, img);
+  }
   return calibrateIntrinsics(views, board, model, fix_aspect_ratio);
 }
 

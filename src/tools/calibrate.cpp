@@ -20,6 +20,7 @@
 #include "cellsight/scanner/calibrate.hpp"
 #include "cellsight/common/calibration.hpp"
 #include "cellsight/common/file_io.hpp"
+#include "cellsight/common/image_io.hpp"
 #include "cellsight/common/yaml_reader.hpp"
 #include "cli_args.hpp"
 
@@ -96,8 +97,7 @@ int extrinsics(const Options& o) {
   YamlMap t(loadYamlFile(taught_file), taught_file);
   const Eigen::Isometry3d T_base_pattern = frameFromThreePoints(vec3(t, "origin"), vec3(t, "on_x"), vec3(t, "in_xy"));
   t.finish();
-  const cv::Mat grey = cv::imread(o.image, cv::IMREAD_GRAYSCALE);
-  if (grey.empty()) throw std::runtime_error(o.image + ": cannot read the image");
+  const cv::Mat grey = readImage(o.image, cv::IMREAD_GRAYSCALE);
   const ExtrinsicsResult r = calibrateExtrinsics(grey, board(o), cam, T_base_pattern);
   saveTransform(o.out, o.parent, o.child_camera,
                 r.T_base_camera, r.rms_px, "pattern PnP + taught pattern frame (residual: reprojection RMS px)");

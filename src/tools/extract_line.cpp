@@ -12,6 +12,7 @@
 
 #include "cellsight/scanner/calibrate.hpp"
 #include "cellsight/common/file_io.hpp"
+#include "cellsight/common/image_io.hpp"
 #include "cellsight/scanner/line_extraction.hpp"
 #include "cli_args.hpp"
 
@@ -56,9 +57,11 @@ int main(int argc, char** argv) {
     nlohmann::json per_frame = nlohmann::json::array();
     long scanned = 0, found = 0;
     for (size_t i = 0; i < files.size(); ++i) {
-      cv::Mat img = cv::imread(files[i], cfg.channel >= 0 ? cv::IMREAD_COLOR : cv::IMREAD_GRAYSCALE);
-      if (img.empty()) {
-        std::cerr << "warning: " << files[i] << ": unreadable, skipped\n";
+      cv::Mat img;
+      try {
+        img = readImage(files[i], cfg.channel >= 0 ? cv::IMREAD_COLOR : cv::IMREAD_GRAYSCALE);
+      } catch (const std::exception& e) {
+        std::cerr << "warning: " << e.what() << ": skipped\n";
         continue;
       }
       if (cfg.channel >= 0) cv::cvtColor(img, img, cv::COLOR_BGR2RGB);

@@ -40,6 +40,7 @@
 #include "cellsight/scanner/accuracy.hpp"
 #include "cellsight/eval/evaluation.hpp"
 #include "cellsight/common/file_io.hpp"
+#include "cellsight/common/image_io.hpp"
 #include "cellsight/eval/sim_scan.hpp"
 #include "cellsight/common/trajectory.hpp"
 #include "cellsight/scanner/scanner_config.hpp"
@@ -287,8 +288,7 @@ int runFrames(const Options& o) {
   size_t used = 0;
   for (const auto& fr : frames.at("frames")) {
     const std::string img_path = resolveRelative(o.frames, fr.at("image").get<std::string>());
-    const cv::Mat img = cv::imread(img_path, cv::IMREAD_UNCHANGED);
-    if (img.empty()) throw std::runtime_error(img_path + ": cannot read the frame");
+    const cv::Mat img = readImage(img_path, cv::IMREAD_UNCHANGED);
     Eigen::Isometry3d T = poseOfJson(fr.at("T_base_flange"));
     if (!o.flange_truth.empty()) {
       const auto it = true_flange.find(fr.at("stamp_ns").get<int64_t>());

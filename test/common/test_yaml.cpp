@@ -6,6 +6,7 @@
 
 #include "cellsight/common/calibration.hpp"
 #include "cellsight/common/file_io.hpp"
+#include "cellsight/common/trajectory.hpp"
 #include "cellsight/common/yaml_reader.hpp"
 #include "test_helpers.hpp"
 
@@ -111,4 +112,18 @@ TEST(FileIo, AnInterruptedWriteLeavesNoTemporaryBehind) {
   EXPECT_FALSE(std::ifstream(stale).good()) << "the dead writer's temporary is still there";
   EXPECT_TRUE(std::ifstream(live).good()) << "a running writer's temporary was removed";
   EXPECT_TRUE(std::ifstream(dir + "/x.yaml").good());
+}
+
+// Issue 19, class 1: a trajectory's step count is bounded before poses are made.
+TEST(Trajectory, AbsurdStepCountsAreRefusedWithTheLimit) {
+  const std::string dir = cellsight_test::tempDir();
+  const std::string file = dir + "/t.yaml";
+  std::ofstream(file) << "trajectories:\n  huge: {type: linear, steps: 2147483647, start: {xyz: [0.5, 0, 0.3], rpy: [3.14159, 0, 0]},"
+                         " end: {xyz: [0.5, 0.1, 0.3], rpy: [3.14159, 0, 0]}}\n";
+  try {
+    cellsight::loadTrajectories(file);
+    FAIL() << "2^31 steps accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("2 to 100000 steps"), std::string::npos) << e.what();
+  }
 }

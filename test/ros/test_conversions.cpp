@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <functional>
+
 #include "cellsight_ros/conversions.hpp"
 
 using namespace cellsight_ros;
@@ -46,4 +48,59 @@ TEST(Conversions, ImageMessage) {
   EXPECT_EQ(toImageMsg(cv::Mat(2, 2, CV_8UC1, cv::Scalar(9)), "c", ros::Time()).encoding, "mono8");
   EXPECT_THROW(toImageMsg(cv::Mat(2, 2, CV_32F), "c", ros::Time()), std::invalid_argument);
   EXPECT_EQ(fromNanoseconds(toNanoseconds(ros::Time(5, 7))), ros::Time(5, 7));
+}
+
+namespace {
+std::string errorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+}  // namespace
+
+// Issue 19, class 1: sizes and offsets of a PointCloud2 are checked before a point is read.
+TEST(Conversions, CloudMessagesWithLyingSizesAreRefused) {
+  cellsight::ScanCloud c;
+  c.frame_id = "base_link";
+  for (int i = 0; i < 5; ++i) c.append(Eigen::Vector3f(0.1f * i, -0.2f, 0.3f + i), 10.f * i);
+  c.normals.assign(5, Eigen::Vector3f::UnitZ());
+  const sensor_msgs::PointCloud2 good = toCloudMsg(c, ros::Time(1, 0));
+  const cellsight::ScanCloud back = fromCloudMsg(good);
+  ASSERT_EQ(back.size(), 5u);
+  EXPECT_TRUE(back.points[3].isApprox(c.points[3]));
+  EXPECT_FLOAT_EQ(back.intensity[4], 40.f);
+  ASSERT_EQ(back.normals.size(), 5u);
+
+  auto m = good;  // width × point_step overflows 32 bits
+  m.width = 0x40000000u;  // × point_step (28) wraps in 32 bits
+  EXPECT_NE(errorOf([&] { fromCloudMsg(m); }).find("shorter than"), std::string::npos);
+  m = good;  // point_step 0 with a huge width
+  m.point_step = 0;
+  m.width = 0xFFFFFFFFu;
+  EXPECT_NE(errorOf([&] { fromCloudMsg(m); }).find("lies past point_step"), std::string::npos);
+  m = good;  // a field past the point
+  for (auto& f : m.fields)
+    if (f.name == "intensity") f.offset = m.point_step;
+  EXPECT_NE(errorOf([&] { fromCloudMsg(m); }).find("'intensity' at offset"), std::string::npos);
+  m = good;  // y stored apart from x: read from its own offset
+  for (auto& f : m.fields) {
+    if (f.name == "y") f.offset = 8;
+    else if (f.name == "z") f.offset = 4;
+  }
+  const cellsight::ScanCloud swapped = fromCloudMsg(m);
+  EXPECT_FLOAT_EQ(swapped.points[3].y(), c.points[3].z());
+  EXPECT_FLOAT_EQ(swapped.points[3].z(), c.points[3].y());
+  m = good;
+  m.data.resize(m.data.size() / 2);
+  EXPECT_NE(errorOf([&] { fromCloudMsg(m); }).find("shorter than"), std::string::npos);
+}
+
+TEST(Conversions, HugeCameraInfoIsRefused) {
+  cellsight::CameraIntrinsics c{"c", 1920, 1080, 2400, 2390, 962.5, 537, {0, 0, 0, 0, 0}};
+  auto ci = toCameraInfo(c, "cam", ros::Time(1, 0));
+  ci.width = ci.height = 60000;
+  EXPECT_NE(errorOf([&] { fromCameraInfo(ci); }).find("over the limit"), std::string::npos);
 }

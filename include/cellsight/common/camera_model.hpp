@@ -1,11 +1,16 @@
 // Pinhole camera with OpenCV/ROS "plumb_bob" distortion (k1, k2, p1, p2, k3), and the ROS
 // camera_info YAML format (the same files camera_calibration and camera_info_manager use).
 #pragma once
+#include <cstdint>
 #include <Eigen/Core>
 #include <array>
 #include <string>
 
 namespace cellsight {
+
+/// The largest image the stack accepts (camera_info, calibration files, images read from disk).
+constexpr int kMaxImageSide = 32768;
+constexpr int64_t kMaxImagePixels = 64ll * 1024 * 1024;
 
 struct CameraIntrinsics {
   std::string camera_name = "camera";

@@ -7,6 +7,9 @@
 
 namespace cellsight {
 
+/// Poses one trajectory may hold (a scan of 100 000 frames is hours of robot time).
+constexpr int kMaxTrajectorySteps = 100000;
+
 struct Trajectory {
   std::string name;
   std::string type;  ///< linear | rotation | poses
