@@ -1,5 +1,7 @@
 #include "cellsight/common/mesh.hpp"
 
+#include "ply_header.hpp"
+
 #include <algorithm>
 #include <array>
 #include <limits>
@@ -82,26 +84,6 @@ std::string lower(std::string s) {
   return s;
 }
 
-struct PlyProperty {
-  std::string name, type, list_count_type;
-  bool is_list = false;
-};
-struct PlyElement {
-  std::string name;
-  size_t count = 0;
-  std::vector<PlyProperty> props;
-};
-
-size_t plyTypeSize(const std::string& t, const std::string& file) {
-  if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
-  if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
-  if (t == "int" || t == "uint" || t == "float" || t == "int32" || t == "uint32" ||
-      t == "float32")
-    return 4;
-  if (t == "double" || t == "float64") return 8;
-  throw ConfigError(file + ": PLY property type '" + t + "' is not supported");
-}
-
 double readBinary(const char* p, const std::string& t) {
   if (t == "char" || t == "int8") return static_cast<double>(*reinterpret_cast<const int8_t*>(p));
   if (t == "uchar" || t == "uint8") return *reinterpret_cast<const uint8_t*>(p);
@@ -120,40 +102,10 @@ double readBinary(const char* p, const std::string& t) {
 }
 
 TriangleMesh loadPly(const std::string& path, const std::string& data, double scale) {
-  std::istringstream header(data);
-  std::string line;
-  std::getline(header, line);
-  if (line.rfind("ply", 0) != 0) throw ConfigError(path + ": not a PLY file (no 'ply' magic)");
-  std::string format;
-  std::vector<PlyElement> elements;
-  size_t header_end = 0;
-  while (std::getline(header, line)) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    std::istringstream ls(line);
-    std::string word;
-    ls >> word;
-    if (word == "format") {
-      ls >> format;
-    } else if (word == "element") {
-      PlyElement e;
-      ls >> e.name >> e.count;
-      elements.push_back(e);
-    } else if (word == "property") {
-      if (elements.empty()) throw ConfigError(path + ": PLY property before any element");
-      PlyProperty p;
-      ls >> p.type;
-      if (p.type == "list") {
-        p.is_list = true;
-        ls >> p.list_count_type >> p.type;
-      }
-      ls >> p.name;
-      elements.back().props.push_back(p);
-    } else if (word == "end_header") {
-      header_end = static_cast<size_t>(header.tellg());
-      break;
-    }
-  }
-  if (header_end == 0) throw ConfigError(path + ": PLY header has no end_header");
+  const ply::Header h = ply::parse(path, data);
+  const std::string& format = h.format;
+  const std::vector<ply::Element>& elements = h.elements;
+  const size_t header_end = h.end;
   if (format != "ascii" && format != "binary_little_endian") {
     throw ConfigError(path + ": PLY format '" + format +
                       "' not supported (use ascii or binary_little_endian)");
@@ -185,12 +137,16 @@ TriangleMesh loadPly(const std::string& path, const std::string& data, double sc
           if (ascii) {
             if (!(body >> n)) throw ConfigError(path + ": PLY list is truncated");
           } else {
-            const size_t s = plyTypeSize(p.list_count_type, path);
+            const size_t s = ply::typeSize(p.list_count_type, path);
             need(s);
             n = readBinary(data.data() + pos, p.list_count_type);
             pos += s;
           }
-          const size_t s = plyTypeSize(p.type, path);
+          const size_t s = ply::typeSize(p.type, path);
+          // a list length the rest of the file cannot hold is a lie, not a long loop
+          if (!(n >= 0) || n > static_cast<double>(data.size() - std::min(data.size(), pos)))
+            throw ConfigError(path + ": PLY list of " + std::to_string(n) + " items in element '" + e.name +
+                              "' runs past the end of the file");
           for (long j = 0; j < static_cast<long>(n); ++j) {
             double v = 0;
             if (ascii) {
@@ -201,6 +157,7 @@ TriangleMesh loadPly(const std::string& path, const std::string& data, double sc
               pos += s;
             }
             if (p.name == "vertex_indices" || p.name == "vertex_index") {
+              if (!(std::abs(v) < 2147483647.0)) throw ConfigError(path + ": PLY face index " + std::to_string(v) + " out of range");
               list.push_back(static_cast<long>(v));
             }
           }
@@ -208,7 +165,7 @@ TriangleMesh loadPly(const std::string& path, const std::string& data, double sc
           if (ascii) {
             if (!(body >> scalars[i])) throw ConfigError(path + ": PLY body is truncated");
           } else {
-            const size_t s = plyTypeSize(p.type, path);
+            const size_t s = ply::typeSize(p.type, path);
             need(s);
             scalars[i] = readBinary(data.data() + pos, p.type);
             pos += s;
@@ -246,6 +203,13 @@ TriangleMesh loadMesh(const std::string& path, double scale) {
   }
   for (const auto& v : mesh.vertices) {
     if (!v.allFinite()) throw ConfigError(path + ": mesh has a non-finite vertex coordinate");
+  }
+  const int nv = static_cast<int>(mesh.vertices.size());
+  for (size_t i = 0; i < mesh.faces.size(); ++i) {
+    const Eigen::Vector3i& f = mesh.faces[i];
+    if ((f.array() < 0).any() || (f.array() >= nv).any())
+      throw ConfigError(path + ": face " + std::to_string(i) + " refers to vertex " +
+                        std::to_string((f.array() < 0).any() ? f.minCoeff() : f.maxCoeff()) + " of " + std::to_string(nv));
   }
   return mesh;
 }

@@ -3,9 +3,11 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <functional>
 
 #include "cellsight/common/errors.hpp"
 #include "cellsight/common/mesh.hpp"
+#include "cellsight/common/scan_cloud.hpp"
 #include "test_helpers.hpp"
 
 using namespace cellsight;
@@ -168,3 +170,47 @@ TEST(Mesh, OtherFormatsThroughAssimp) {
   EXPECT_NE(e.find("bad.off"), std::string::npos) << e;
 }
 
+
+// Issue 19, class 2: mesh and cloud files whose headers lie are refused before they are read.
+TEST(FileHeaders, LyingMeshAndCloudFilesAreRefusedWithTheCause) {
+  const std::string dir = cellsight_test::tempDir();
+  auto write = [&](const std::string& name, const std::string& text) {
+    std::ofstream(dir + "/" + name, std::ios::binary) << text;
+    return dir + "/" + name;
+  };
+  auto error = [](const std::function<void()>& f) {
+    try {
+      f();
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string("(no error)");
+  };
+  const std::string tri = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                          "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                          "0 0 0\n1 0 0\n0 1 0\n";
+  EXPECT_EQ(loadMesh(write("ok.ply", "ply\nformat ascii 1.0\n" + tri + "3 0 1 2\n")).faces.size(), 1u);
+  EXPECT_NE(error([&] { loadMesh(write("oob.ply", "ply\nformat ascii 1.0\n" + tri + "3 0 1 7\n")); }).find("refers to vertex 7"),
+            std::string::npos);
+  EXPECT_NE(error([&] { loadMesh(write("noprops.ply", "ply\nformat ascii 1.0\nelement junk 1099511627776\n" + tri + "3 0 1 2\n")); })
+                .find("no properties"),
+            std::string::npos);
+  EXPECT_NE(error([&] { loadMesh(write("minus.ply", "ply\nformat ascii 1.0\nelement vertex -1\nproperty float x\nend_header\n")); })
+                .find("not a count"),
+            std::string::npos);
+  EXPECT_NE(error([&] {
+              loadCloud(write("huge.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\nproperty float x\n"
+                                          "property float y\nproperty float z\nend_header\n" + std::string(24, '\0')));
+            }).find("claims"),
+            std::string::npos);
+  EXPECT_NE(error([&] { loadCloud(write("empty.pcd", "")); }).find("empty"), std::string::npos);
+  const std::string pcd = "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\n";
+  EXPECT_EQ(loadCloud(write("ok.pcd", pcd + "DATA ascii\n0.1 0.2 0.3\n0.4 0.5 nan\n")).size(), 1u);
+  EXPECT_NE(error([&] { loadCloud(write("text.pcd", pcd + "DATA ascii\n0.1 0.2 0.3\nhello world again\n")); }).find("not a number"),
+            std::string::npos);
+  EXPECT_NE(error([&] { loadCloud(write("short.pcd", pcd + "DATA binary\n" + std::string(12, '\0'))); }).find("claims 2 points"),
+            std::string::npos);
+  EXPECT_NE(error([&] { loadCloud(write("fields.pcd", "FIELDS x y z\nSIZE 4 4\nTYPE F F F\nWIDTH 1\nHEIGHT 1\nDATA ascii\n1 2 3\n")); })
+                .find("same number of fields"),
+            std::string::npos);
+}

@@ -37,5 +37,9 @@ size_t removeNonFinite(ScanCloud& cloud);
 void saveCloud(const std::string& path, const ScanCloud& cloud);
 /// Reads PLY or PCD (x y z, optional normals and intensity). Throws ConfigError naming the file.
 ScanCloud loadCloud(const std::string& path);
+/// The header of a PLY or PCD cloud checked against the file before a reader trusts it (empty
+/// file, counts that are not counts, fields that disagree, a body shorter than announced, text
+/// where numbers belong). ConfigError naming the file; loadCloud runs it first.
+void checkCloudFile(const std::string& path);
 
 }  // namespace cellsight
