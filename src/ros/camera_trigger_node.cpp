@@ -42,6 +42,9 @@ using Poses = std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Iso
 
 class CameraTrigger {
  public:
+  ~CameraTrigger() {
+    if (worker_.joinable()) worker_.join();
+  }
   CameraTrigger(ros::NodeHandle& nh, ros::NodeHandle& pnh)
       : nh_(nh), diag_(nh, pnh, "camera_trigger", "frames"), tf_listener_(tf_buffer_), server_(nh, "scan", false) {
     trajectory_file_ = cellsight_ros::requireParam<std::string>(
@@ -67,8 +70,30 @@ class CameraTrigger {
   }
 
  private:
+  /// Scans run on a thread of their own, never on a callback thread: as a nodelet the scan's
+  /// blocking calls (robot/move_flange, scan/finish) and waits (frames, in-position) need
+  /// callbacks of nodelets in the same manager, and the manager may queue one of those behind
+  /// the very thread that waits (seen: scan/finish answered only when its 60 s deadline had
+  /// passed). A goal that arrives during a scan preempts it and is taken up when it has ended.
   void onGoal() {
-    auto goal = server_.acceptNewGoal();
+    std::lock_guard<std::mutex> lock(goal_mutex_);
+    if (busy_) return;  // the running scan sees the preempt request, then takes the new goal
+    busy_ = true;
+    if (worker_.joinable()) worker_.join();  // a thread that has already ended
+    worker_ = std::thread([this] {
+      for (;;) {
+        runGoal(*server_.acceptNewGoal());
+        std::lock_guard<std::mutex> l(goal_mutex_);
+        if (!server_.isNewGoalAvailable() || !ros::ok()) {
+          busy_ = false;
+          return;
+        }
+      }
+    });
+  }
+
+  void runGoal(const cellsight::ScanGoal& goal_msg) {
+    const cellsight::ScanGoal* goal = &goal_msg;
     ScanResult result;
     try {
       execute(*goal, result);
@@ -186,10 +211,9 @@ class CameraTrigger {
                      std::to_string(result.points) + " points in " + std::to_string(result.scan_seconds) + " s";
   }
 
-  /// scan/finish with a deadline: roscpp's call has none, and a request to a server in the same
-  /// process has been seen to go unanswered (no server thread busy, the client waiting forever).
-  /// After the server's own frame wait plus 30 s the call is made again on a new connection; the
-  /// abandoned call's thread is detached (roscpp cannot cancel a call; it returns at shutdown).
+  /// scan/finish with a deadline (roscpp's call has none): after the server's own frame wait plus
+  /// 30 s the call is made again once on a new connection; the abandoned call's thread is
+  /// detached (roscpp cannot cancel a call; it returns at the latest at shutdown).
   bool callFinish(cellsight::FinishScan& fin) {
     const double deadline = fin.request.wait_frames_timeout + 30.0;
     for (int attempt = 0; attempt < 2; ++attempt) {
@@ -448,6 +472,9 @@ class CameraTrigger {
   }
 
   ros::NodeHandle nh_;
+  std::mutex goal_mutex_;
+  bool busy_ = false;  // a scan thread is running (guarded by goal_mutex_)
+  std::thread worker_;
   cellsight_ros::NodeDiagnostics diag_;
   tf2_ros::Buffer tf_buffer_;
   tf2_ros::TransformListener tf_listener_;
