@@ -178,14 +178,7 @@ TEST(FileHeaders, LyingMeshAndCloudFilesAreRefusedWithTheCause) {
     std::ofstream(dir + "/" + name, std::ios::binary) << text;
     return dir + "/" + name;
   };
-  auto error = [](const std::function<void()>& f) {
-    try {
-      f();
-    } catch (const std::exception& e) {
-      return std::string(e.what());
-    }
-    return std::string("(no error)");
-  };
+  const auto error = cellsight_test::errorOf;
   const std::string tri = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                           "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
                           "0 0 0\n1 0 0\n0 1 0\n";

@@ -233,14 +233,7 @@ TEST(SelfCalibration, BadCapturesAreRefusedWithTheirCause) {
   CalibrationCaptureConfig cc;
   const ChessboardSpec board{{cc.board_cols, cc.board_rows}, cc.square};
   const CameraIntrinsics& K = scene.scanner_camera.intrinsics;
-  auto message = [](const std::function<void()>& f) {
-    try {
-      f();
-    } catch (const std::exception& e) {
-      return std::string(e.what());
-    }
-    return std::string("(no error)");
-  };
+  const auto message = cellsight_test::errorOf;
   // no pattern in the image (the bare table)
   cv::Mat table(K.height, K.width, CV_8UC1, cv::Scalar(100));
   EXPECT_NE(message([&] { calibrateExtrinsics(table, board, K, Eigen::Isometry3d::Identity()); }).find("not found"),
