@@ -50,6 +50,7 @@
 #include "cellsight/localization/model_matching.hpp"
 #include "cellsight/sim/scene.hpp"
 #include "cli_args.hpp"
+#include "json_pose.hpp"
 
 using namespace cellsight;
 using json = nlohmann::json;
@@ -416,13 +417,6 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
   return out;
 }
 
-Eigen::Isometry3d poseOf(const json& d) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.translation() = Eigen::Vector3d(d.at("xyz")[0], d.at("xyz")[1], d.at("xyz")[2]);
-  T.linear() = Eigen::Quaterniond(d.at("quat")[3], d.at("quat")[0], d.at("quat")[1], d.at("quat")[2]).normalized().toRotationMatrix();
-  return T;
-}
-
 int runDemo(const Options& o) {
   const Scene scene = loadScene(o.orRoot(o.scene, "config/scenes/demo.yaml"));
   auto lib = std::make_shared<const ModelLibrary>(o.orRoot(o.models, "config/models"));
@@ -437,7 +431,7 @@ int runDemo(const Options& o) {
   }
   std::vector<ScoredDetection> dets;
   for (const json& d : raw["detections"])
-    dets.push_back({d.at("model"), poseOf(d), d.at("fitness"), d.at("coverage"), d.at("rmse").get<double>()});
+    dets.push_back({d.at("model"), cellsight_tools::poseFromJson(d), d.at("fitness"), d.at("coverage"), d.at("rmse").get<double>()});
   // "found": the right model within 5 mm / 5° (a gross-error test); the errors are reported as measured
   DetectionCounts counts;
   std::vector<double> terr, rerr;

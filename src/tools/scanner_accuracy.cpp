@@ -37,6 +37,7 @@
 #include <tuple>
 
 #include "cli_args.hpp"
+#include "json_pose.hpp"
 #include "cellsight/scanner/accuracy.hpp"
 #include "cellsight/eval/evaluation.hpp"
 #include "cellsight/common/file_io.hpp"
@@ -61,13 +62,6 @@ struct Options {
   double sphere_step_mm = 0.5, tolerance_m = 1e-6, radius_mm = 12.5, margin_mm = 3;
   std::vector<double> center;
 };
-
-Eigen::Isometry3d poseOfJson(const nlohmann::json& d) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.translation() = Eigen::Vector3d(d.at("xyz")[0], d.at("xyz")[1], d.at("xyz")[2]);
-  T.linear() = Eigen::Quaterniond(d.at("quat")[3], d.at("quat")[0], d.at("quat")[1], d.at("quat")[2]).normalized().toRotationMatrix();
-  return T;
-}
 
 std::vector<Eigen::Vector3d> toDouble(const ScanCloud& c) {
   std::vector<Eigen::Vector3d> out;
@@ -277,7 +271,7 @@ int runFrames(const Options& o) {
     while (std::getline(t, line)) {
       if (line.empty()) continue;
       const nlohmann::json j = nlohmann::json::parse(line);
-      true_flange[j.at("stamp_ns").get<int64_t>()] = poseOfJson(j.at("T_base_flange"));
+      true_flange[j.at("stamp_ns").get<int64_t>()] = cellsight_tools::poseFromJson(j.at("T_base_flange"));
     }
   }
   const ScannerSettings settings = loadScannerSettings(o.scanner_config);
@@ -289,7 +283,7 @@ int runFrames(const Options& o) {
   for (const auto& fr : frames.at("frames")) {
     const std::string img_path = resolveRelative(o.frames, fr.at("image").get<std::string>());
     const cv::Mat img = readImage(img_path, cv::IMREAD_UNCHANGED);
-    Eigen::Isometry3d T = poseOfJson(fr.at("T_base_flange"));
+    Eigen::Isometry3d T = cellsight_tools::poseFromJson(fr.at("T_base_flange"));
     if (!o.flange_truth.empty()) {
       const auto it = true_flange.find(fr.at("stamp_ns").get<int64_t>());
       if (it == true_flange.end())
