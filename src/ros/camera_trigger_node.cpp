@@ -18,7 +18,6 @@
 
 #include <condition_variable>
 #include <cmath>
-#include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <thread>
@@ -192,9 +191,9 @@ class CameraTrigger {
       fin.request.output_file = goal.output_file;
       fin.request.expected_frames = captured;
       fin.request.wait_frames_timeout = processing_timeout_;
-      if (!callFinish(fin)) {
+      if (!finish_client_.call(fin)) {
         result.status = ScanResult::PROCESSING_FAILED;
-        result.message = "call to scan/finish failed or went unanswered twice (is the triangulation node running?)";
+        result.message = "call to scan/finish failed (triangulation node gone?)";
         return;
       }
       if (fin.response.status != cellsight::FinishScan::Response::OK) {
@@ -209,40 +208,6 @@ class CameraTrigger {
     result.status = ScanResult::OK;
     result.message = "'" + name + "': " + std::to_string(captured) + " frames, " +
                      std::to_string(result.points) + " points in " + std::to_string(result.scan_seconds) + " s";
-  }
-
-  /// scan/finish with a deadline (roscpp's call has none): after the server's own frame wait plus
-  /// 30 s the call is made again once on a new connection; the abandoned call's thread is
-  /// detached (roscpp cannot cancel a call; it returns at the latest at shutdown).
-  bool callFinish(cellsight::FinishScan& fin) {
-    const double deadline = fin.request.wait_frames_timeout + 30.0;
-    for (int attempt = 0; attempt < 2; ++attempt) {
-      struct Call {
-        std::mutex m;
-        std::condition_variable cv;
-        bool done = false, ok = false;
-        cellsight::FinishScan srv;
-      };
-      auto call = std::make_shared<Call>();
-      call->srv = fin;
-      ros::ServiceClient client = attempt == 0 ? finish_client_ : nh_.serviceClient<cellsight::FinishScan>("scan/finish");
-      std::thread([call, client]() mutable {
-        const bool ok = client.call(call->srv);
-        std::lock_guard<std::mutex> lock(call->m);
-        call->ok = ok;
-        call->done = true;
-        call->cv.notify_all();
-      }).detach();
-      std::unique_lock<std::mutex> lock(call->m);
-      if (call->cv.wait_for(lock, std::chrono::duration<double>(deadline), [&] { return call->done; })) {
-        fin = call->srv;
-        return call->ok;
-      }
-      ROS_WARN("camera_trigger: scan/finish did not answer within %.0f s; calling it again on a new connection",
-               deadline);
-      diag_.dropped("scan/finish unanswered");
-    }
-    return false;
   }
 
   bool move(const Eigen::Isometry3d& pose, double speed_scale, ScanResult& result, double& expected) {
