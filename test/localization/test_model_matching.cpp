@@ -1,10 +1,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <functional>
 #include <fstream>
 #include <random>
 
@@ -382,26 +380,19 @@ TEST(ModelCache, PreparedModelsLoadFromDiskWithTheSameResult) {
   const std::vector<std::string> ids = {"housing", "bracket"};
   const Eigen::Isometry3d truth = onTable(0.5, 0.02, 0.7);
   const ScanCloud view = singleViewCloud(library()->model("housing").mesh, truth, kEye, 0.001, 2e-5, 5);
-  auto seconds = [](const std::function<void()>& f) {
-    const auto t0 = std::chrono::steady_clock::now();
-    f();
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  };
   ModelMatcher cold(library(), c);
-  const double cold_s = seconds([&] { cold.prepare(ids); });
+  cold.prepare(ids);
   std::vector<std::string> files;
   for (const auto& e : std::filesystem::directory_iterator(dir)) files.push_back(e.path().string());
   ASSERT_EQ(files.size(), 2u);
-  ModelMatcher warm(library(), c);
-  const double warm_s = seconds([&] { warm.prepare(ids); });
-  std::printf("model preparation: %.3f s prepared, %.3f s from the cache\n", cold_s, warm_s);
+  ModelMatcher warm(library(), c);  // loads (its speed: bench_localization, model_preparation_ours)
+  warm.prepare(ids);
   const auto a = cold.locate({view}, ids), b = warm.locate({view}, ids);
   ASSERT_EQ(a.size(), 1u);
   ASSERT_EQ(b.size(), 1u);
   EXPECT_EQ(a[0].model, b[0].model);
   EXPECT_TRUE(a[0].pose.isApprox(b[0].pose, 0.0));
   EXPECT_EQ(a[0].fitness, b[0].fitness);
-  EXPECT_LT(warm_s, cold_s);
   // a damaged file: prepared again (same result) and rewritten
   const auto size0 = std::filesystem::file_size(files[0]);
   std::filesystem::resize_file(files[0], size0 / 2);
