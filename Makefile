@@ -2,12 +2,16 @@
 #   make demo   install what is missing, build, run the simulated cell cycle headless → out/demo/
 #   make test   install what is missing, build, run every test (ctest); non-zero on any failure
 #   make bench  build and run the benchmarks (figures in docs/)
+#   make sanitize   clang ASan + UBSan build (_build_san), the core and scanner gtests under it
+#   make fuzz       every libFuzzer target for FUZZ_SECONDS each (default 60) from test/fuzz/corpus
 SHELL := /bin/bash
 export PATH := /usr/bin:/bin:/usr/sbin:/sbin:$(PATH)
 BUILD ?= _build
 JOBS ?= 2
+SAN_BUILD ?= _build_san
+FUZZ_SECONDS ?= 60
 
-.PHONY: all deps configure build test demo bench clean format
+.PHONY: all deps configure build test demo bench sanitize fuzz clean format
 
 all: build
 
@@ -33,8 +37,14 @@ demo:
 bench: build
 	@bash scripts/bench.sh $(BUILD)
 
+sanitize: deps
+	@bash scripts/sanitize.sh $(SAN_BUILD)
+
+fuzz: deps
+	@bash scripts/fuzz.sh $(FUZZ_SECONDS) $(SAN_BUILD)
+
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')
 
 clean:
-	rm -rf $(BUILD)
+	rm -rf $(BUILD) $(SAN_BUILD)

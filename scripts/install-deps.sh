@@ -8,13 +8,15 @@ export DEBIAN_FRONTEND=noninteractive
 PACKAGES=(
   # build tools
   build-essential cmake pkg-config ccache googletest libgtest-dev libbenchmark-dev
+  # the sanitizer + fuzz build (make sanitize, make fuzz): clang with its ASan/UBSan/libFuzzer runtimes
+  clang-14 libclang-rt-14-dev
   # ROS 1 (Debian's own packaging, under /usr)
   catkin catkin-lint python3-rosdep2 ros-message-generation ros-message-runtime libroscpp-dev
   libtf2-ros-dev libtf2-eigen-dev libtf2-geometry-msgs-dev ros-tf2-msgs
   libsensor-msgs-dev libgeometry-msgs-dev libvisualization-msgs-dev libstd-msgs-dev libstd-srvs-dev
   ros-std-msgs ros-std-srvs ros-geometry-msgs ros-sensor-msgs ros-visualization-msgs ros-rosgraph-msgs
   libactionlib-dev libactionlib-msgs-dev ros-actionlib-msgs python3-actionlib
-  libcv-bridge-dev libimage-transport-dev libdiagnostic-updater-dev libdiagnostic-msgs-dev ros-diagnostic-msgs
+  libimage-transport-dev libdiagnostic-updater-dev libdiagnostic-msgs-dev ros-diagnostic-msgs
   libnodeletlib-dev libnodeletlib-tools libnodelet-dev pluginlib-dev
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
   librosbag-dev python3-rosbag librostest-dev python3-rostest python3-roslaunch python3-rosmaster rosout

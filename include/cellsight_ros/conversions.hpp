@@ -40,6 +40,12 @@ cellsight::CameraIntrinsics fromCameraInfo(const sensor_msgs::CameraInfo& msg);
 /// CV_8UC1 → mono8, CV_8UC3 (RGB order) → rgb8.
 sensor_msgs::Image toImageMsg(const cv::Mat& image, const std::string& frame, const ros::Time& stamp);
 
+/// A received image as an OpenCV header over the message's bytes (no copy; valid while `msg`
+/// lives): mono8 → CV_8UC1, rgb8 / bgr8 → CV_8UC3 in the message's channel order. Checks, in
+/// 64 bits, the size against kMaxImageSide / kMaxImagePixels, step ≥ width × channels and
+/// step × height = data size; throws std::invalid_argument naming the encoding or the field.
+cv::Mat fromImageMsg(const sensor_msgs::Image& msg);
+
 /// x y z intensity [normal_x normal_y normal_z] (float32), unorganised, dense.
 sensor_msgs::PointCloud2 toCloudMsg(const cellsight::ScanCloud& cloud, const ros::Time& stamp);
 /// Reads x y z (required) and intensity / normals (optional); non-finite points are dropped

@@ -84,105 +84,25 @@ std::string lower(std::string s) {
   return s;
 }
 
-double readBinary(const char* p, const std::string& t) {
-  if (t == "char" || t == "int8") return static_cast<double>(*reinterpret_cast<const int8_t*>(p));
-  if (t == "uchar" || t == "uint8") return *reinterpret_cast<const uint8_t*>(p);
-  int16_t s16;
-  uint16_t u16;
-  int32_t s32;
-  uint32_t u32;
-  float f;
-  double d;
-  if (t == "short" || t == "int16") return std::memcpy(&s16, p, 2), s16;
-  if (t == "ushort" || t == "uint16") return std::memcpy(&u16, p, 2), u16;
-  if (t == "int" || t == "int32") return std::memcpy(&s32, p, 4), s32;
-  if (t == "uint" || t == "uint32") return std::memcpy(&u32, p, 4), u32;
-  if (t == "float" || t == "float32") return std::memcpy(&f, p, 4), f;
-  return std::memcpy(&d, p, 8), d;
-}
-
 TriangleMesh loadPly(const std::string& path, const std::string& data, double scale) {
-  const ply::Header h = ply::parse(path, data);
-  const std::string& format = h.format;
-  const std::vector<ply::Element>& elements = h.elements;
-  const size_t header_end = h.end;
-  if (format != "ascii" && format != "binary_little_endian") {
-    throw ConfigError(path + ": PLY format '" + format +
-                      "' not supported (use ascii or binary_little_endian)");
-  }
-  TriangleMesh mesh;
-  const bool ascii = format == "ascii";
-  std::istringstream body(ascii ? data.substr(header_end) : std::string());
-  size_t pos = header_end;
-  auto need = [&](size_t n) {
-    if (pos + n > data.size()) throw ConfigError(path + ": PLY body is truncated");
+  const ply::Body body = ply::readBody(path, data, ply::parse(path, data));
+  const auto& props = body.vertex_props;
+  const auto at = [&](const char* name) {
+    return static_cast<size_t>(std::find(props.begin(), props.end(), name) - props.begin());
   };
-  for (const auto& e : elements) {
-    int ix = -1, iy = -1, iz = -1;
-    for (size_t i = 0; i < e.props.size(); ++i) {
-      if (e.props[i].name == "x") ix = static_cast<int>(i);
-      if (e.props[i].name == "y") iy = static_cast<int>(i);
-      if (e.props[i].name == "z") iz = static_cast<int>(i);
-    }
-    if (e.name == "vertex" && (ix < 0 || iy < 0 || iz < 0)) {
-      throw ConfigError(path + ": PLY vertex element lacks x, y or z");
-    }
-    for (size_t k = 0; k < e.count; ++k) {
-      std::vector<double> scalars(e.props.size(), 0.0);
-      std::vector<long> list;
-      for (size_t i = 0; i < e.props.size(); ++i) {
-        const auto& p = e.props[i];
-        if (p.is_list) {
-          double n = 0;
-          if (ascii) {
-            if (!(body >> n)) throw ConfigError(path + ": PLY list is truncated");
-          } else {
-            const size_t s = ply::typeSize(p.list_count_type, path);
-            need(s);
-            n = readBinary(data.data() + pos, p.list_count_type);
-            pos += s;
-          }
-          const size_t s = ply::typeSize(p.type, path);
-          // a list length the rest of the file cannot hold is a lie, not a long loop
-          if (!(n >= 0) || n > static_cast<double>(data.size() - std::min(data.size(), pos)))
-            throw ConfigError(path + ": PLY list of " + std::to_string(n) + " items in element '" + e.name +
-                              "' runs past the end of the file");
-          for (long j = 0; j < static_cast<long>(n); ++j) {
-            double v = 0;
-            if (ascii) {
-              if (!(body >> v)) throw ConfigError(path + ": PLY list is truncated");
-            } else {
-              need(s);
-              v = readBinary(data.data() + pos, p.type);
-              pos += s;
-            }
-            if (p.name == "vertex_indices" || p.name == "vertex_index") {
-              if (!(std::abs(v) < 2147483647.0)) throw ConfigError(path + ": PLY face index " + std::to_string(v) + " out of range");
-              list.push_back(static_cast<long>(v));
-            }
-          }
-        } else {
-          if (ascii) {
-            if (!(body >> scalars[i])) throw ConfigError(path + ": PLY body is truncated");
-          } else {
-            const size_t s = ply::typeSize(p.type, path);
-            need(s);
-            scalars[i] = readBinary(data.data() + pos, p.type);
-            pos += s;
-          }
-        }
-      }
-      if (e.name == "vertex") {
-        mesh.vertices.emplace_back(static_cast<float>(scalars[ix] * scale),
-                                   static_cast<float>(scalars[iy] * scale),
-                                   static_cast<float>(scalars[iz] * scale));
-      } else if (e.name == "face") {
-        for (size_t j = 2; j < list.size(); ++j) {  // fan-triangulate polygons
-          mesh.faces.emplace_back(static_cast<int>(list[0]), static_cast<int>(list[j - 1]),
-                                  static_cast<int>(list[j]));
-        }
-      }
-    }
+  const size_t ix = at("x"), iy = at("y"), iz = at("z"), n = props.size();
+  if (ix == n || iy == n || iz == n) throw ConfigError(path + ": PLY vertex element lacks x, y or z");
+  TriangleMesh mesh;
+  const size_t count = n ? body.vertices.size() / n : 0;
+  mesh.vertices.reserve(count);
+  for (size_t k = 0; k < count; ++k) {
+    const double* v = &body.vertices[k * n];
+    mesh.vertices.emplace_back(static_cast<float>(v[ix] * scale), static_cast<float>(v[iy] * scale),
+                               static_cast<float>(v[iz] * scale));
+  }
+  for (const auto& list : body.faces) {
+    for (size_t j = 2; j < list.size(); ++j)  // fan-triangulate polygons
+      mesh.faces.emplace_back(static_cast<int>(list[0]), static_cast<int>(list[j - 1]), static_cast<int>(list[j]));
   }
   return mesh;
 }

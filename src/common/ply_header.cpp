@@ -1,5 +1,8 @@
 #include "ply_header.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <cstring>
 #include <sstream>
 
 namespace cellsight::ply {
@@ -76,6 +79,97 @@ Header parse(const std::string& path, const std::string& data) {
   if (need > can)
     throw ConfigError(path + ": PLY header claims more data than the file's " + std::to_string(body) + " body bytes hold");
   return h;
+}
+
+namespace {
+
+double readBinary(const char* p, const std::string& t) {
+  if (t == "char" || t == "int8") return static_cast<double>(*reinterpret_cast<const int8_t*>(p));
+  if (t == "uchar" || t == "uint8") return *reinterpret_cast<const uint8_t*>(p);
+  int16_t s16;
+  uint16_t u16;
+  int32_t s32;
+  uint32_t u32;
+  float f;
+  double d;
+  if (t == "short" || t == "int16") return std::memcpy(&s16, p, 2), s16;
+  if (t == "ushort" || t == "uint16") return std::memcpy(&u16, p, 2), u16;
+  if (t == "int" || t == "int32") return std::memcpy(&s32, p, 4), s32;
+  if (t == "uint" || t == "uint32") return std::memcpy(&u32, p, 4), u32;
+  if (t == "float" || t == "float32") return std::memcpy(&f, p, 4), f;
+  return std::memcpy(&d, p, 8), d;
+}
+
+}  // namespace
+
+Body readBody(const std::string& path, const std::string& data, const Header& h) {
+  if (h.format != "ascii" && h.format != "binary_little_endian") {
+    throw ConfigError(path + ": PLY format '" + h.format + "' not supported (use ascii or binary_little_endian)");
+  }
+  Body out;
+  const bool ascii = h.format == "ascii";
+  std::istringstream body(ascii ? data.substr(h.end) : std::string());
+  size_t pos = h.end;
+  auto need = [&](size_t n) {
+    if (pos + n > data.size()) throw ConfigError(path + ": PLY body is truncated");
+  };
+  for (const auto& e : h.elements) {
+    const bool vertex = e.name == "vertex", face = e.name == "face";
+    if (vertex) {
+      for (const auto& p : e.props)
+        if (!p.is_list) out.vertex_props.push_back(p.name);
+      out.vertices.reserve(e.count * out.vertex_props.size());  // parse() checked the body holds them
+    }
+    for (size_t k = 0; k < e.count; ++k) {
+      std::vector<long> list;
+      for (const auto& p : e.props) {
+        if (p.is_list) {
+          double n = 0;
+          if (ascii) {
+            if (!(body >> n)) throw ConfigError(path + ": PLY list is truncated");
+          } else {
+            const size_t s = typeSize(p.list_count_type, path);
+            need(s);
+            n = readBinary(data.data() + pos, p.list_count_type);
+            pos += s;
+          }
+          const size_t s = typeSize(p.type, path);
+          // a list length the rest of the file cannot hold is a lie, not a long loop
+          if (!(n >= 0) || n > static_cast<double>(data.size() - std::min(data.size(), pos)))
+            throw ConfigError(path + ": PLY list of " + std::to_string(n) + " items in element '" + e.name +
+                              "' runs past the end of the file");
+          const bool indices = face && (p.name == "vertex_indices" || p.name == "vertex_index");
+          for (long j = 0; j < static_cast<long>(n); ++j) {
+            double v = 0;
+            if (ascii) {
+              if (!(body >> v)) throw ConfigError(path + ": PLY list is truncated");
+            } else {
+              need(s);
+              v = readBinary(data.data() + pos, p.type);
+              pos += s;
+            }
+            if (indices) {
+              if (!(std::abs(v) < 2147483647.0)) throw ConfigError(path + ": PLY face index " + std::to_string(v) + " out of range");
+              list.push_back(static_cast<long>(v));
+            }
+          }
+        } else {
+          double v = 0;
+          if (ascii) {
+            if (!(body >> v)) throw ConfigError(path + ": PLY body is truncated");
+          } else {
+            const size_t s = typeSize(p.type, path);
+            need(s);
+            v = readBinary(data.data() + pos, p.type);
+            pos += s;
+          }
+          if (vertex) out.vertices.push_back(v);
+        }
+      }
+      if (face) out.faces.push_back(std::move(list));
+    }
+  }
+  return out;
 }
 
 }  // namespace cellsight::ply

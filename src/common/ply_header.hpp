@@ -33,4 +33,16 @@ size_t typeSize(const std::string& t, const std::string& file);
 /// size times the count; ascii: one value per two bytes). ConfigError naming the file.
 Header parse(const std::string& path, const std::string& data);
 
+/// What the mesh and cloud readers take from a PLY body.
+struct Body {
+  std::vector<std::string> vertex_props;  ///< scalar properties of 'vertex', in file order
+  std::vector<double> vertices;           ///< count x vertex_props.size(), row by row
+  std::vector<std::vector<long>> faces;   ///< the vertex_indices (or vertex_index) list of each 'face'
+};
+
+/// Reads the body of `data` as `h` describes it (ascii or binary_little_endian; other elements
+/// are read past). Every read is bounded by the file's size; lists longer than the rest of the
+/// file and face indices beyond int range are refused. ConfigError naming the file.
+Body readBody(const std::string& path, const std::string& data, const Header& h);
+
 }  // namespace cellsight::ply

@@ -8,7 +8,7 @@
 
 namespace cellsight {
 
-PointGrid::PointGrid(const std::vector<Eigen::Vector3f>& points, float cell) : cell_(cell), points_(points) {
+PointGrid::PointGrid(const std::vector<Eigen::Vector3f>& points, float cell) : points_(points) {
   if (!(cell > 0) || !std::isfinite(cell)) throw std::invalid_argument("PointGrid: cell must be > 0");
   inv_cell_ = 1.f / cell;
   Eigen::Vector3f lo = Eigen::Vector3f::Constant(std::numeric_limits<float>::max());

@@ -6,7 +6,6 @@
 // frame's flange pose is interpolated by tf at its stamp. At the end the triangulation node
 // finishes the cloud (scan/finish). Frames may also be saved as PNG with frames.json.
 #include <actionlib/server/simple_action_server.h>
-#include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
@@ -402,15 +401,14 @@ class CameraTrigger {
     entry["T_base_flange"] = {{"xyz", {pose.translation().x(), pose.translation().y(), pose.translation().z()}},
                               {"quat", {q.x(), q.y(), q.z(), q.w()}}};
     if (!save_dir_.empty()) {
-      cv_bridge::CvImageConstPtr cv;
+      cv::Mat out;
       try {
-        cv = cv_bridge::toCvShare(image);
-      } catch (const cv_bridge::Exception& e) {
-        ROS_ERROR("camera_trigger: frame %d has an unusable encoding '%s': %s", index, image->encoding.c_str(), e.what());
-        diag_.dropped("unusable image encoding");
+        out = cellsight_ros::fromImageMsg(*image);
+      } catch (const std::invalid_argument& e) {
+        ROS_ERROR("camera_trigger: frame %d is unusable: %s", index, e.what());
+        diag_.dropped("unusable image");
         return false;
       }
-      cv::Mat out = cv->image;
       if (image->encoding == sensor_msgs::image_encodings::RGB8) cv::cvtColor(out, out, cv::COLOR_RGB2BGR);
       char name[64];
       std::snprintf(name, sizeof(name), "images/frame_%04d.png", index);

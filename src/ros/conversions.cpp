@@ -147,6 +147,41 @@ sensor_msgs::Image toImageMsg(const cv::Mat& image, const std::string& frame,
   return m;
 }
 
+cv::Mat fromImageMsg(const sensor_msgs::Image& m) {
+  namespace enc = sensor_msgs::image_encodings;
+  int channels = 0;
+  if (m.encoding == enc::MONO8) {
+    channels = 1;
+  } else if (m.encoding == enc::RGB8 || m.encoding == enc::BGR8) {
+    channels = 3;
+  } else {
+    throw std::invalid_argument("image encoding '" + m.encoding.substr(0, 64) +
+                                "' is not supported (mono8, rgb8, bgr8)");
+  }
+  const auto size = [&] { return std::to_string(m.width) + "x" + std::to_string(m.height); };
+  if (m.width == 0 || m.height == 0) throw std::invalid_argument("image is empty (" + size() + ")");
+  if (m.width > static_cast<uint32_t>(cellsight::kMaxImageSide) ||
+      m.height > static_cast<uint32_t>(cellsight::kMaxImageSide) ||
+      static_cast<int64_t>(m.width) * m.height > cellsight::kMaxImagePixels) {
+    throw std::invalid_argument("image " + size() + " exceeds the limit of " +
+                                std::to_string(cellsight::kMaxImageSide) + " px per side and " +
+                                std::to_string(cellsight::kMaxImagePixels) + " px");
+  }
+  const uint64_t row = static_cast<uint64_t>(m.width) * static_cast<uint64_t>(channels);
+  if (m.step < row) {
+    throw std::invalid_argument("image step " + std::to_string(m.step) + " is less than width x channels (" +
+                                std::to_string(row) + ")");
+  }
+  const uint64_t need = static_cast<uint64_t>(m.step) * m.height;
+  if (m.data.size() != need) {
+    throw std::invalid_argument("image data holds " + std::to_string(m.data.size()) + " bytes, step x height is " +
+                                std::to_string(need));
+  }
+  // a read-only header over the message's bytes; callers only read it
+  return cv::Mat(static_cast<int>(m.height), static_cast<int>(m.width), CV_8UC(channels),
+                 const_cast<uint8_t*>(m.data.data()), static_cast<size_t>(m.step));
+}
+
 sensor_msgs::PointCloud2 toCloudMsg(const cellsight::ScanCloud& c, const ros::Time& stamp) {
   sensor_msgs::PointCloud2 m;
   m.header.frame_id = c.frame_id;

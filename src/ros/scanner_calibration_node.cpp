@@ -4,11 +4,12 @@
 // ~calibration_dir (the folder calibration_publisher serves): on any failure the previous file
 // stays as it was. With ~reload_publisher the calibration_publisher re-reads its folder after a
 // successful calibration.
-#include <cv_bridge/cv_bridge.h>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_eigen/tf2_eigen.h>
+
+#include <opencv2/imgproc.hpp>
 
 #include "cellsight/CalibrateExtrinsics.h"
 #include "cellsight/CalibrateIntrinsics.h"
@@ -67,12 +68,19 @@ class ScannerCalibration {
 
   /// The request's image as 8-bit grey (mono8 as it is; rgb8/bgr8 converted); throws naming it.
   static cv::Mat grey(const sensor_msgs::Image& image, const std::string& what) {
+    cv::Mat view;
     try {
-      return cv_bridge::toCvCopy(image, sensor_msgs::image_encodings::MONO8)->image;
-    } catch (const cv_bridge::Exception& e) {
-      throw std::invalid_argument(what + ": unusable image (encoding '" + image.encoding + "', " +
-                                  std::to_string(image.width) + "x" + std::to_string(image.height) + "): " + e.what());
+      view = cellsight_ros::fromImageMsg(image);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(what + ": unusable image: " + e.what());
     }
+    cv::Mat grey;
+    if (view.channels() == 1) {
+      grey = view.clone();
+    } else {
+      cv::cvtColor(view, grey, image.encoding == sensor_msgs::image_encodings::RGB8 ? cv::COLOR_RGB2GRAY : cv::COLOR_BGR2GRAY);
+    }
+    return grey;
   }
 
   /// The file of ~calibration_dir that already calibrates `child_frame` (so the new result

@@ -1,7 +1,6 @@
 // triangulation: scanner images + the light sheet at their stamps → one profile per frame
 // (scan/profile, base frame) and the accumulated scan. scan/finish applies the statistical
 // outlier filter, the workspace crop and normals, saves PLY/PCD and publishes scan/cloud.
-#include <cv_bridge/cv_bridge.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
 #include <image_transport/subscriber_filter.h>
@@ -164,18 +163,18 @@ class Triangulation {
       return;
     }
     cv::Mat img;
+    try {
+      img = cellsight_ros::fromImageMsg(*image);
+    } catch (const std::invalid_argument& e) {
+      ROS_ERROR_THROTTLE(5.0, "triangulation: unusable image: %s: frame dropped", e.what());
+      diag_.dropped("unusable image");
+      return;
+    }
     if (image->encoding == enc::MONO8) {
-      img = cv_bridge::toCvShare(image)->image;
       lc.channel = -1;
-    } else if (image->encoding == enc::RGB8 || image->encoding == enc::BGR8) {
-      img = cv_bridge::toCvShare(image)->image;
+    } else {
       if (lc.channel < 0) lc.channel = 0;  // red laser by default
       if (image->encoding == enc::BGR8) lc.channel = 2 - lc.channel;
-    } else {
-      ROS_ERROR_THROTTLE(5.0, "triangulation: encoding '%s' is not supported (mono8, rgb8, bgr8): frame dropped",
-                         image->encoding.c_str());
-      diag_.dropped("unsupported image encoding");
-      return;
     }
     geometry_msgs::TransformStamped T;
     try {

@@ -85,7 +85,7 @@ class PointGrid {
     }
   }
 
-  float cell_ = 0, inv_cell_ = 0;
+  float inv_cell_ = 0;
   Eigen::Vector3f origin_ = Eigen::Vector3f::Zero();
   int dims_[3] = {0, 0, 0};
   std::vector<Eigen::Vector3f> points_;  // as given

@@ -35,11 +35,16 @@ size_t removeNonFinite(ScanCloud& cloud);
 
 /// Writes PLY (binary) or PCD (binary) by extension, atomically. Throws std::runtime_error.
 void saveCloud(const std::string& path, const ScanCloud& cloud);
-/// Reads PLY or PCD (x y z, optional normals and intensity). Throws ConfigError naming the file.
+/// Reads PLY (ascii / binary little-endian) or PCD (ascii / binary / binary_compressed): x y z,
+/// optional intensity and normals (normal_x… or nx…); non-finite points dropped. Own readers,
+/// bounded by the file's size: PCL's readers trust their headers and crash on malformed files
+/// (fuzz_cloud, docs/reliability.md). Throws ConfigError naming the file.
 ScanCloud loadCloud(const std::string& path);
-/// The header of a PLY or PCD cloud checked against the file before a reader trusts it (empty
-/// file, counts that are not counts, fields that disagree, a body shorter than announced, text
-/// where numbers belong). ConfigError naming the file; loadCloud runs it first.
+/// The same through PCL's readers (after checkCloudFile), kept for comparison; loadCloud and
+/// this agree on valid files (test_common).
+ScanCloud loadCloudWithPcl(const std::string& path);
+/// Reads the file as loadCloud does and throws what it would (empty file, counts that are not
+/// counts, fields that disagree, a body shorter than announced, text where numbers belong).
 void checkCloudFile(const std::string& path);
 
 }  // namespace cellsight
