@@ -4,14 +4,17 @@
 #   make bench  build and run the benchmarks (figures in docs/)
 #   make sanitize   clang ASan + UBSan build (_build_san), the core and scanner gtests under it
 #   make fuzz       every libFuzzer target for FUZZ_SECONDS each (default 60) from test/fuzz/corpus
+#   make soak       SOAK_CYCLES (default 1000) cell cycles against one set of nodes → out/soak/
 SHELL := /bin/bash
 export PATH := /usr/bin:/bin:/usr/sbin:/sbin:$(PATH)
 BUILD ?= _build
 JOBS ?= 2
 SAN_BUILD ?= _build_san
 FUZZ_SECONDS ?= 60
+SOAK_CYCLES ?= 1000
+SOAK_TRAJECTORY ?= quick_sweep
 
-.PHONY: all deps configure build test demo bench sanitize fuzz clean format
+.PHONY: all deps configure build test demo bench sanitize fuzz soak clean format
 
 all: build
 
@@ -42,6 +45,9 @@ sanitize: deps
 
 fuzz: deps
 	@bash scripts/fuzz.sh $(FUZZ_SECONDS) $(SAN_BUILD)
+
+soak: build
+	@SOAK_MAX_CYCLE_RATIO=$${SOAK_MAX_CYCLE_RATIO:-1.5} bash scripts/soak.sh $(SOAK_CYCLES) $(SOAK_TRAJECTORY) $(BUILD) out/soak
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.hpp')

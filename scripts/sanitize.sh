@@ -8,9 +8,14 @@ set -euo pipefail
 export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 CONFIGURE_ONLY=0
 if [ "${1:-}" = "--configure-only" ]; then CONFIGURE_ONLY=1; shift; fi
-BUILD=${1:-_build_san}
+BUILD=$(realpath -m "${1:-_build_san}")
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 TESTS="test_common test_sim test_scanner test_localization test_eval test_scanner_acceptance test_ros_conversions"
+# Under ASan + UBSan + libFuzzer coverage the full model-matching runs take ~50x their time (about
+# 10 min on 2 cores): CI leaves them out of test_localization; SANITIZE_ALL=1 runs them too.
+filter() {
+  if [ "$1" = test_localization ] && [ "${SANITIZE_ALL:-0}" != 1 ]; then echo "--gtest_filter=-ModelMatching*"; fi
+}
 
 if [ ! -f "$BUILD/CMakeCache.txt" ]; then
   command -v clang++ >/dev/null || { echo "sanitize: clang++ is missing: run scripts/install-deps.sh" >&2; exit 2; }
@@ -35,11 +40,12 @@ failed=()
 for t in $TESTS; do
   log="$BUILD/sanitize_$t.log"
   start=$(date +%s)
-  if (cd "$BUILD" && "devel/lib/cellsight/$t" >"$log" 2>&1); then
-    echo "sanitize: $t passed, 0 reports ($(( $(date +%s) - start )) s)"
+  # shellcheck disable=SC2046
+  if (cd "$BUILD" && "devel/lib/cellsight/$t" $(filter "$t") >"$log" 2>&1); then
+    echo "sanitize: $t passed, 0 reports ($(grep -c '^\[       OK \]' "$log") tests, $(( $(date +%s) - start )) s)"
   else
     echo "sanitize: $t FAILED ($log):" >&2
-    grep -E "ERROR: |runtime error|SUMMARY|\[  FAILED  \]" "$log" | head -20 >&2 || tail -30 "$log" >&2
+    grep -E "ERROR: |runtime error|SUMMARY|\[  FAILED  \]" "$log" | head -20 >&2 || tail -30 "$log" >&2 || true
     failed+=("$t")
   fi
 done
