@@ -69,7 +69,7 @@ if [ -s "$OUT/soak.csv" ] && command -v gnuplot >/dev/null; then
   done
   first=$(echo "$nodes" | head -1)
   gnuplot <<GP || echo "soak: warning: gnuplot could not draw $OUT/soak.png" >&2
-set terminal pngcairo size 1200,1100
+set terminal pngcairo size 1200,1100 noenhanced
 set output '$OUT/soak.png'
 set datafile separator ','
 set multiplot layout 3,1 title 'cellsight soak: $CYCLES cycles of $TRAJECTORY'

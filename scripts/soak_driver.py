@@ -13,6 +13,7 @@ Usage: soak_driver.py --cycles 50 --trajectory quick_sweep --out out/soak [--war
 """
 import argparse
 import json
+import logging
 import os
 import statistics
 import sys
@@ -80,6 +81,9 @@ def main():
     os.makedirs(a.out, exist_ok=True)
 
     rospy.init_node("soak_driver", disable_signals=True)
+    # actionlib's Python SimpleActionClient logs an error for each status update of the previous
+    # (finished) goal that arrives after the next goal was sent; it is not a failure of the cycle
+    logging.getLogger("rosout").addFilter(lambda r: "goal handle that we're not tracking" not in r.getMessage())
     master = rosgraph.Master("/soak_driver")
     scan = actionlib.SimpleActionClient("scan", ScanAction)
     if not scan.wait_for_server(rospy.Duration(120)):
@@ -152,9 +156,12 @@ def main():
         mine = [r for r in rows if r[1] == node and r[3] is not None]
         after = [r for r in mine if r[0] >= a.warmup]
         s = slope([r[0] for r in after], [r[3] for r in after])
+        late = [r for r in mine if r[0] >= len(times) // 2]  # the second half: steps of the allocator vs a trend
+        s_late = slope([r[0] for r in late], [r[3] for r in late])
         fd_growth = mine[-1][4] - mine[0][4] if mine else 0
         summary["processes"][node] = {"rss_kb_first": mine[0][3], "rss_kb_last": mine[-1][3],
-                                      "rss_slope_kb_per_cycle": s, "open_files_first": mine[0][4],
+                                      "rss_slope_kb_per_cycle": s, "rss_slope_second_half_kb_per_cycle": s_late,
+                                      "open_files_first": mine[0][4],
                                       "open_files_last": mine[-1][4]}
         if s > a.max_slope_kb:
             bad.append({"why": "%s: RSS grows %.2f kB per cycle (limit %.1f)" % (node, s, a.max_slope_kb)})
@@ -167,9 +174,9 @@ def main():
         json.dump(summary, f, indent=2)
     os.replace(os.path.join(a.out, "soak.json.tmp"), os.path.join(a.out, "soak.json"))
     for node, p in summary["processes"].items():
-        print("soak: %-22s RSS %7d -> %7d kB, slope %+.2f kB/cycle, open files %d -> %d" % (
-            node, p["rss_kb_first"], p["rss_kb_last"], p["rss_slope_kb_per_cycle"], p["open_files_first"],
-            p["open_files_last"]))
+        print("soak: %-22s RSS %7d -> %7d kB, slope %+.2f kB/cycle (second half %+.2f), open files %d -> %d" % (
+            node, p["rss_kb_first"], p["rss_kb_last"], p["rss_slope_kb_per_cycle"],
+            p["rss_slope_second_half_kb_per_cycle"], p["open_files_first"], p["open_files_last"]))
     print("soak: %d cycles, median %.2f s, max %.2f s (%.2f x median), %d failures" % (
         len(times), median, max(times), max(times) / median, len(failures)))
     if bad:

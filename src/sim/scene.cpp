@@ -38,6 +38,11 @@ CameraConfig parseCamera(const YamlMap& m, const std::string& default_name) {
   c.intrinsics.camera_name = m.getString("name", default_name);
   c.frame_id = m.getString("frame_id", default_name + "_optical");
   auto res = m.getDoubles("resolution", 2);
+  for (double r : res) {  // checked before the cast: a double beyond int is undefined there
+    if (!(r >= 1 && r <= kMaxImageSide && r == std::floor(r)))
+      m.fail("resolution", "must be two whole numbers of pixels in [1, " + std::to_string(kMaxImageSide) +
+                               "] (got " + std::to_string(r) + ")");
+  }
   c.intrinsics.width = static_cast<int>(res[0]);
   c.intrinsics.height = static_cast<int>(res[1]);
   auto f = m.getDoubles("focal_px", 2);

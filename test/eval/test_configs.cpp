@@ -120,6 +120,16 @@ TEST(BadConfig, UnknownKeyIsNamed) {
       << sceneError(nested);
 }
 
+// a resolution beyond int (found by fuzz_yaml: the cast was undefined) or not whole pixels
+TEST(BadConfig, ResolutionOutOfRangeIsNamed) {
+  for (const char* bad : {"[1.4e56, 480]", "[640, 0]", "[640.5, 480]", "[40000, 480]"}) {
+    std::string text = kGoodScene;
+    text.replace(text.find("[640, 480]"), 10, bad);
+    EXPECT_NE(sceneError(text).find("resolution: must be two whole numbers of pixels"), std::string::npos)
+        << bad << ": " << sceneError(text);
+  }
+}
+
 TEST(BadConfig, MalformedYamlIsNamed) {
   EXPECT_NE(sceneError("name: [unclosed\n").find("YAML syntax error"), std::string::npos);
   EXPECT_NE(sceneError("- just\n- a list\n").find("must be a mapping"), std::string::npos);

@@ -170,6 +170,9 @@ std::vector<sensor_msgs::Image> badImages(const ros::Time& stamp) {
   std::vector<sensor_msgs::Image> out;
   im.step = 268435456u;  // 48 × step = 3 × 2^32: wraps to 0 in 32 bits, data empty
   out.push_back(im);
+  im.step = 89478486u;  // 48 × step = 2^32 + 32: 32 bytes pass a 32-bit check (cv_bridge's), rows 4 GB apart
+  im.data.assign(32, 0);
+  out.push_back(im);
   im.step = 10;  // less than width
   im.data.assign(480, 0);
   out.push_back(im);
