@@ -110,8 +110,18 @@ Body readBody(const std::string& path, const std::string& data, const Header& h)
   const bool ascii = h.format == "ascii";
   std::istringstream body(ascii ? data.substr(h.end) : std::string());
   size_t pos = h.end;
-  auto need = [&](size_t n) {
-    if (pos + n > data.size()) throw ConfigError(path + ": PLY body is truncated");
+  // the next value of `type`, from the text or the bytes; `part` names what is truncated
+  auto value = [&](const std::string& type, const char* part) {
+    double v = 0;
+    if (ascii) {
+      if (!(body >> v)) throw ConfigError(path + ": PLY " + part + " is truncated");
+      return v;
+    }
+    const size_t size = typeSize(type, path);
+    if (pos + size > data.size()) throw ConfigError(path + ": PLY " + part + " is truncated");
+    v = readBinary(data.data() + pos, type);
+    pos += size;
+    return v;
   };
   for (const auto& e : h.elements) {
     const bool vertex = e.name == "vertex", face = e.name == "face";
@@ -124,45 +134,21 @@ Body readBody(const std::string& path, const std::string& data, const Header& h)
       std::vector<long> list;
       for (const auto& p : e.props) {
         if (p.is_list) {
-          double n = 0;
-          if (ascii) {
-            if (!(body >> n)) throw ConfigError(path + ": PLY list is truncated");
-          } else {
-            const size_t s = typeSize(p.list_count_type, path);
-            need(s);
-            n = readBinary(data.data() + pos, p.list_count_type);
-            pos += s;
-          }
-          const size_t s = typeSize(p.type, path);
+          const double n = value(p.list_count_type, "list");
           // a list length the rest of the file cannot hold is a lie, not a long loop
           if (!(n >= 0) || n > static_cast<double>(data.size() - std::min(data.size(), pos)))
             throw ConfigError(path + ": PLY list of " + std::to_string(n) + " items in element '" + e.name +
                               "' runs past the end of the file");
           const bool indices = face && (p.name == "vertex_indices" || p.name == "vertex_index");
           for (long j = 0; j < static_cast<long>(n); ++j) {
-            double v = 0;
-            if (ascii) {
-              if (!(body >> v)) throw ConfigError(path + ": PLY list is truncated");
-            } else {
-              need(s);
-              v = readBinary(data.data() + pos, p.type);
-              pos += s;
-            }
+            const double v = value(p.type, "list");
             if (indices) {
               if (!(std::abs(v) < 2147483647.0)) throw ConfigError(path + ": PLY face index " + std::to_string(v) + " out of range");
               list.push_back(static_cast<long>(v));
             }
           }
         } else {
-          double v = 0;
-          if (ascii) {
-            if (!(body >> v)) throw ConfigError(path + ": PLY body is truncated");
-          } else {
-            const size_t s = typeSize(p.type, path);
-            need(s);
-            v = readBinary(data.data() + pos, p.type);
-            pos += s;
-          }
+          const double v = value(p.type, "body");
           if (vertex) out.vertices.push_back(v);
         }
       }
