@@ -3,10 +3,11 @@
 locate_objects service) N times against one set of running nodes, and after every cycle samples
 each node's resident memory and open files (/proc of the PID its XML-RPC API gives).
 
-Writes <out>/soak.csv (one row per cycle and process) and <out>/soak.json (per process: RSS
-slope in kB per cycle by least squares over the cycles after the warm-up, open-file growth;
-cycle times: median, max, max / median; failures). Exit 1 when a cycle failed, a slope is over
---max-slope-kb, open files grew by more than --max-fd-growth, or (with --max-cycle-ratio) a
+Writes <out>/soak.csv (one row per cycle and process) and <out>/soak.json (per process: the RSS
+trend in kB per cycle after the warm-up -- Theil-Sen, the median of pairwise slopes, so that a
+step of the allocator or noise does not read as a leak -- beside the least-squares slope; open-file
+growth; cycle times: median, max, max / median; failures). Exit 1 when a cycle failed, a trend is
+over --max-slope-kb, open files grew by more than --max-fd-growth, or (with --max-cycle-ratio) a
 cycle took longer than that many medians.
 
 Usage: soak_driver.py --cycles 50 --trajectory quick_sweep --out out/soak [--warmup N]
@@ -62,6 +63,12 @@ def slope(xs, ys):
     return sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx if sxx > 0 else 0.0
 
 
+def theil_sen(xs, ys):
+    """Median of the pairwise slopes: a steady growth shows in it, a single step or noise hardly."""
+    pairs = [(ys[j] - ys[i]) / (xs[j] - xs[i]) for i in range(len(xs)) for j in range(i + 1, len(xs)) if xs[j] != xs[i]]
+    return statistics.median(pairs) if pairs else 0.0
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cycles", type=int, default=50)
@@ -70,7 +77,7 @@ def main():
     ap.add_argument("--warmup", type=int, default=-1,
                     help="cycles left out of the slope while pools and caches fill; default 20 or a tenth of the cycles, whichever is more")
     ap.add_argument("--cycle-timeout", type=float, default=300.0)
-    ap.add_argument("--max-slope-kb", type=float, default=8.0, help="RSS growth limit per process, kB per cycle")
+    ap.add_argument("--max-slope-kb", type=float, default=8.0, help="RSS trend limit per process, kB per cycle")
     ap.add_argument("--max-fd-growth", type=int, default=4, help="open files a process may gain over the run")
     ap.add_argument("--max-cycle-ratio", type=float, default=0.0, help="fail when a cycle exceeds this many medians (0: report only)")
     a = ap.parse_args(rospy.myargv()[1:])
@@ -156,15 +163,19 @@ def main():
         mine = [r for r in rows if r[1] == node and r[3] is not None]
         after = [r for r in mine if r[0] >= a.warmup]
         s = slope([r[0] for r in after], [r[3] for r in after])
+        step = max(1, len(after) // 300)  # the pairwise median over at most 300 samples
+        ts = theil_sen([r[0] for r in after[::step]], [r[3] for r in after[::step]])
         late = [r for r in mine if r[0] >= len(times) // 2]  # the second half: steps of the allocator vs a trend
         s_late = slope([r[0] for r in late], [r[3] for r in late])
         fd_growth = mine[-1][4] - mine[0][4] if mine else 0
         summary["processes"][node] = {"rss_kb_first": mine[0][3], "rss_kb_last": mine[-1][3],
                                       "rss_slope_kb_per_cycle": s, "rss_slope_second_half_kb_per_cycle": s_late,
+                                      "rss_trend_kb_per_cycle": ts,
                                       "open_files_first": mine[0][4],
                                       "open_files_last": mine[-1][4]}
-        if s > a.max_slope_kb:
-            bad.append({"why": "%s: RSS grows %.2f kB per cycle (limit %.1f)" % (node, s, a.max_slope_kb)})
+        if ts > a.max_slope_kb:
+            bad.append({"why": "%s: RSS grows %.2f kB per cycle (Theil-Sen trend after the warm-up; limit %.1f)" % (
+                node, ts, a.max_slope_kb)})
         if fd_growth > a.max_fd_growth:
             bad.append({"why": "%s: %d more open files than at the start" % (node, fd_growth)})
     if a.max_cycle_ratio > 0 and max(times) > a.max_cycle_ratio * median:
@@ -174,9 +185,10 @@ def main():
         json.dump(summary, f, indent=2)
     os.replace(os.path.join(a.out, "soak.json.tmp"), os.path.join(a.out, "soak.json"))
     for node, p in summary["processes"].items():
-        print("soak: %-22s RSS %7d -> %7d kB, slope %+.2f kB/cycle (second half %+.2f), open files %d -> %d" % (
-            node, p["rss_kb_first"], p["rss_kb_last"], p["rss_slope_kb_per_cycle"],
-            p["rss_slope_second_half_kb_per_cycle"], p["open_files_first"], p["open_files_last"]))
+        print("soak: %-22s RSS %7d -> %7d kB, trend %+.2f kB/cycle (least squares %+.2f, second half %+.2f), "
+              "open files %d -> %d" % (node, p["rss_kb_first"], p["rss_kb_last"], p["rss_trend_kb_per_cycle"],
+                                       p["rss_slope_kb_per_cycle"], p["rss_slope_second_half_kb_per_cycle"],
+                                       p["open_files_first"], p["open_files_last"]))
     print("soak: %d cycles, median %.2f s, max %.2f s (%.2f x median), %d failures" % (
         len(times), median, max(times), max(times) / median, len(failures)))
     if bad:
