@@ -258,6 +258,11 @@ cellsight::ScanCloud fromCloudMsg(const sensor_msgs::PointCloud2& m, size_t* dro
   cellsight::ScanCloud c;
   c.frame_id = m.header.frame_id;
   const size_t n = static_cast<size_t>(m.width) * m.height;  // ≤ data.size() / 12 after the checks
+  // no points: done (a width of 0 under a height of 2^32 would otherwise walk 2^32 empty rows)
+  if (n == 0) {
+    if (dropped) *dropped = 0;
+    return c;
+  }
   c.points.reserve(n);
   c.intensity.reserve(n);
   if (normals) c.normals.reserve(n);

@@ -74,6 +74,13 @@ TEST(Conversions, CloudMessagesWithLyingSizesAreRefused) {
   EXPECT_FLOAT_EQ(back.intensity[4], 40.f);
   ASSERT_EQ(back.normals.size(), 5u);
 
+  {  // zero width under a 2^32 - 1 height: no points, and no walk over 4 billion empty rows (fuzz_ros_msgs)
+    auto e = good;
+    e.width = 0;
+    e.row_step = 0;
+    e.height = 0xFFFFFFFFu;
+    EXPECT_EQ(fromCloudMsg(e).size(), 0u);
+  }
   auto m = good;  // width × point_step overflows 32 bits
   m.width = 0x40000000u;  // × point_step (28) wraps in 32 bits
   EXPECT_NE(errorOf([&] { fromCloudMsg(m); }).find("shorter than"), std::string::npos);
