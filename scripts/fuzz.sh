@@ -10,6 +10,8 @@ export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
 SECONDS_PER_TARGET=${1:-60}
 BUILD=$(realpath -m "${2:-_build_san}")
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
+# shellcheck disable=SC1091
+source "$ROOT/scripts/report-failure.sh"
 TARGETS=${FUZZ_TARGETS:-"fuzz_mesh fuzz_cloud fuzz_yaml fuzz_ros_msgs"}
 case $SECONDS_PER_TARGET in ''|*[!0-9]*) echo "fuzz: seconds per target must be a whole number, not '$SECONDS_PER_TARGET'" >&2; exit 2 ;; esac
 
@@ -35,7 +37,7 @@ for t in $TARGETS; do
     echo "fuzz: $t ok: $runs inputs in ${SECONDS_PER_TARGET} s ($((runs / (SECONDS_PER_TARGET > 0 ? SECONDS_PER_TARGET : 1))) per second)"
   else
     echo "fuzz: $t FAILED; the input is in $ART/, the report:" >&2
-    grep -E "ERROR|runtime error|SUMMARY|Test unit written" "$log" | head -20 >&2 || tail -30 "$log" >&2 || true
+    show_report "$log" "ERROR|runtime error|SUMMARY|Test unit written"
     failed+=("$t")
   fi
 done

@@ -10,6 +10,8 @@ CONFIGURE_ONLY=0
 if [ "${1:-}" = "--configure-only" ]; then CONFIGURE_ONLY=1; shift; fi
 BUILD=$(realpath -m "${1:-_build_san}")
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
+# shellcheck disable=SC1091
+source "$ROOT/scripts/report-failure.sh"
 TESTS="test_common test_sim test_scanner test_localization test_eval test_scanner_acceptance test_ros_conversions"
 # Under ASan + UBSan + libFuzzer coverage, model matching runs ~50x slower: the full matching
 # runs of test_localization (10 min on 2 cores) and the two demo-scan localisation tests of
@@ -50,7 +52,7 @@ for t in $TESTS; do
     echo "sanitize: $t passed, 0 reports ($(grep -c '^\[       OK \]' "$log") tests, $(( $(date +%s) - start )) s)"
   else
     echo "sanitize: $t FAILED ($log):" >&2
-    grep -E "ERROR: |runtime error|SUMMARY|\[  FAILED  \]" "$log" | head -20 >&2 || tail -30 "$log" >&2 || true
+    show_report "$log" "ERROR: |runtime error|SUMMARY|\[  FAILED  \]"
     failed+=("$t")
   fi
 done
