@@ -33,7 +33,7 @@ for t in $TARGETS; do
   if "$BUILD/fuzz/$t" "$work" "$ROOT/test/fuzz/corpus/$t" -max_total_time="$SECONDS_PER_TARGET" \
       -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=1024 -max_len=8192 -print_final_stats=1 \
       -artifact_prefix="$ART/$t-" >"$log" 2>&1; then
-    runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || echo 0)
+    runs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -n1 || echo 0)
     echo "fuzz: $t ok: $runs inputs in ${SECONDS_PER_TARGET} s ($((runs / (SECONDS_PER_TARGET > 0 ? SECONDS_PER_TARGET : 1))) per second)"
   else
     echo "fuzz: $t FAILED; the input is in $ART/, the report:" >&2
