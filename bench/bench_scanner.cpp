@@ -48,20 +48,31 @@ void BM_ExtractAndTriangulate(benchmark::State& state) {
     ++i;
   }
   state.counters["points/frame"] = static_cast<double>(points) / static_cast<double>(i);
-  state.SetLabel("cellsight: centroid + edge filter + quadratic smoothing + LUT undistortion");
+  state.SetLabel("cellsight: ridge + linking + smoothing along the line + LUT undistortion");
 }
 BENCHMARK(BM_ExtractAndTriangulate)->Unit(benchmark::kMillisecond);
 
-void BM_ExtractOnly(benchmark::State& state) {
+void extractOnly(benchmark::State& state, cellsight::LineExtractionConfig::Estimator estimator) {
   Data& d = Data::get();
   cellsight::LineExtractionConfig line;
-  size_t i = 0;
+  line.estimator = estimator;
+  size_t i = 0, points = 0;
   for (auto _ : state) {
     auto pts = cellsight::extractLine(d.frames[i++ % d.frames.size()], line);
+    points += pts.size();
     benchmark::DoNotOptimize(pts.data());
   }
+  state.counters["points/frame"] = static_cast<double>(points) / static_cast<double>(i);
+  state.SetLabel(cellsight::LineExtractionConfig::estimatorName(estimator));
 }
+/// The default: orientation-free ridge centres, linked and smoothed.
+void BM_ExtractOnly(benchmark::State& state) { extractOnly(state, cellsight::LineExtractionConfig::Estimator::kRidge); }
 BENCHMARK(BM_ExtractOnly)->Unit(benchmark::kMillisecond);
+/// The column method (one centre per column, centroid + smoothing) on the same frames.
+void BM_ExtractColumnsCentroid(benchmark::State& state) {
+  extractOnly(state, cellsight::LineExtractionConfig::Estimator::kCentroid);
+}
+BENCHMARK(BM_ExtractColumnsCentroid)->Unit(benchmark::kMillisecond);
 
 void BM_PeerOpenCvColumnMaxUndistort(benchmark::State& state) {
   // What a user would glue together from OpenCV: per-column maximum row, then undistortPoints.

@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "cellsight/eval/sim_scan.hpp"
 
 namespace cellsight {
 
@@ -68,65 +72,149 @@ namespace cellsight {
 
 LineCentreErrors lineCentreErrors(const ScannerRenderer& renderer, const Eigen::Isometry3d& T_base_flange,
                                   const LineExtractionConfig& config, uint64_t seed) {
-  const Scene& scene = renderer.geometry().scene();
-  const CameraIntrinsics& K = scene.scanner_camera.intrinsics;
-  const Eigen::Isometry3d T_cam_base = scene.scanner_camera.T_base_camera.inverse();
-  // Sheet ∩ table: a point and direction in the base frame.
-  const Plane sheet = laserPlane(T_base_flange * scene.laser.T_flange_laser);
-  const Eigen::Vector3d dir = sheet.n.cross(Eigen::Vector3d::UnitZ()).normalized();
-  const Eigen::Vector3d o = (T_base_flange * scene.laser.T_flange_laser).translation();
-  Eigen::Vector3d q(o.x(), o.y(), scene.table.z);
-  const Eigen::Vector3d in_plane(sheet.n.x(), sheet.n.y(), 0);
-  q -= sheet.distance(q) / in_plane.squaredNorm() * in_plane;
-  auto image = [&](double s) { return K.project(T_cam_base * (q + s * dir)); };
-  // Analytic centre at column u: bisection on s for image(s).x == u.
-  auto rowAt = [&](double u, double& v) {
-    double lo = -1.0, hi = 1.0;
-    const bool inc = image(hi).x() > image(lo).x();
-    for (int i = 0; i < 80; ++i) {
-      const double mid = 0.5 * (lo + hi);
-      if ((image(mid).x() < u) == inc) lo = mid; else hi = mid;
-    }
-    v = image(0.5 * (lo + hi)).y();
-    return v >= 0 && v < K.height;
+  const CameraConfig& cam = renderer.camera();
+  const CameraIntrinsics& K = cam.intrinsics;
+  const RayCaster& caster = renderer.geometry().caster();
+  const Plane sheet = renderer.planeInCamera(T_base_flange);  // camera optical frame
+  const Eigen::Isometry3d& T_base_camera = cam.T_base_camera;
+  const Eigen::Vector3f origin = T_base_camera.translation().cast<float>();
+  // f(u, v): signed distance (m) to the sheet of the surface point seen at pixel (u, v).
+  auto f = [&](double u, double v, int& geometry) {
+    const Eigen::Vector2d xy = K.undistortPixel({u, v});
+    const Eigen::Vector3d d_cam = Eigen::Vector3d(xy.x(), xy.y(), 1.0).normalized();
+    const RayHit h = caster.intersect(origin, (T_base_camera.linear() * d_cam).cast<float>());
+    geometry = h.hit ? h.geometry : -1;
+    return h.hit ? sheet.distance(d_cam * static_cast<double>(h.t)) : 0.0;
   };
   const cv::Mat img = renderer.render(T_base_flange, seed);
   LineExtractionConfig c = config;
-  c.line_along_rows = true;
+  c.line_along_rows = lineAlongRows(sheet);  // the column methods search across the trace, as the node does
   const auto pts = extractLine(img, c);
-  // The lit extent: columns where the noise-free laser is present.
   const cv::Mat clean = renderer.renderLaserOnly(T_base_flange);
-  cv::Mat colmax;
-  cv::reduce(clean, colmax, 0, cv::REDUCE_MAX, CV_32F);
-  int first = -1, last = -1;
-  for (int u = 0; u < colmax.cols; ++u) {
-    if (colmax.at<float>(0, u) > 20.f) {
-      if (first < 0) first = u;
-      last = u;
-    }
-  }
   LineCentreErrors e;
-  if (first < 0) return e;
-  const int margin = (last - first) / 10;
-  first += margin;
-  last -= margin;
-  e.expected = static_cast<size_t>(last - first + 1);
+  e.centres = pts.size();
   double s2 = 0, s1 = 0;
+  std::vector<double> errs;
   for (const auto& p : pts) {
-    if (p.u < first || p.u > last) continue;
-    double v;
-    if (!rowAt(p.u, v)) continue;
-    const double err = p.v - v;
+    const int iu = static_cast<int>(std::lround(p.u)), iv = static_cast<int>(std::lround(p.v));
+    if (iu < 0 || iv < 0 || iu >= clean.cols || iv >= clean.rows || clean.at<float>(iv, iu) < 20.f) continue;
+    int g0, g1, g2, g3, g4;
+    const double f0 = f(p.u, p.v, g0);
+    const double fx = (f(p.u + 0.5, p.v, g1) - f(p.u - 0.5, p.v, g2));
+    const double fy = (f(p.u, p.v + 0.5, g3) - f(p.u, p.v - 0.5, g4));
+    if (g0 < 0 || g1 != g0 || g2 != g0 || g3 != g0 || g4 != g0) continue;
+    const double grad = std::hypot(fx, fy);
+    if (!(grad > 0)) continue;
+    const double err = std::abs(f0 / grad);
     s2 += err * err;
-    s1 += std::abs(err);
-    e.max_px = std::max(e.max_px, std::abs(err));
-    ++e.columns;
+    s1 += err;
+    e.max_px = std::max(e.max_px, err);
+    errs.push_back(err);
+    ++e.points;
   }
-  if (e.columns) {
-    e.rms_px = std::sqrt(s2 / static_cast<double>(e.columns));
-    e.mean_px = s1 / static_cast<double>(e.columns);
+  if (e.points) {
+    e.rms_px = std::sqrt(s2 / static_cast<double>(e.points));
+    e.mean_px = s1 / static_cast<double>(e.points);
+    const auto k = errs.begin() + static_cast<long>(errs.size() * 95 / 100);
+    std::nth_element(errs.begin(), k, errs.end());
+    e.p95_px = *k;
   }
+  cv::Mat clean8;
+  clean.convertTo(clean8, CV_8U);
+  LineCoverageRule rule;
+  rule.min_contrast = 20;
+  rule.background = 0;
+  rule.smooth_sigma = 0;
+  const LineCoverage cov = lineCoverage(clean8, pts, rule);
+  e.coverage = cov.coverage();
+  e.false_share = cov.falseShare();
   return e;
+}
+
+LineCoverage lineCoverage(const cv::Mat& mono, const std::vector<LinePoint>& centres, const LineCoverageRule& rule) {
+  if (mono.empty() || mono.type() != CV_8UC1) throw std::invalid_argument("lineCoverage: needs a CV_8UC1 image");
+  cv::Mat sm;
+  if (rule.smooth_sigma > 0) cv::GaussianBlur(mono, sm, cv::Size(), rule.smooth_sigma);
+  else sm = mono;
+  double bg = rule.background;
+  if (bg < 0) {
+    // Local background: a white top-hat keeps what is narrower than the element (a line) and
+    // removes what is wider (a glow, a lit area).
+    const int k = 2 * rule.max_width + 1;
+    cv::morphologyEx(sm, sm, cv::MORPH_TOPHAT, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(k, k)));
+    bg = 0;
+  }
+  const double T = bg + rule.min_contrast;
+  LineCoverage out;
+  out.mask = cv::Mat::zeros(mono.size(), CV_8UC1);
+  out.missed = cv::Mat::zeros(mono.size(), CV_8UC1);
+  cv::Mat lit;  // a centre near a pixel at half the contrast or more is not counted as false
+  cv::compare(sm, bg + 0.5 * rule.min_contrast, lit, cv::CMP_GE);
+  // Centres by pixel row and column, for the "is there a centre in this run" test.
+  const int W = mono.cols, H = mono.rows;
+  std::vector<std::vector<float>> by_col(static_cast<size_t>(W)), by_row(static_cast<size_t>(H));
+  for (const auto& p : centres) {
+    const long u = std::lround(p.u), v = std::lround(p.v);
+    if (u >= 0 && u < W) by_col[static_cast<size_t>(u)].push_back(p.v);
+    if (v >= 0 && v < H) by_row[static_cast<size_t>(v)].push_back(p.u);
+  }
+  const double tol = rule.tolerance_px;
+  auto runs = [&](bool transpose, auto on_run) {
+    const int n_lines = transpose ? H : W, len = transpose ? W : H;
+    for (int i = 0; i < n_lines; ++i) {
+      auto value = [&](int j) { return transpose ? sm.at<uint8_t>(i, j) : sm.at<uint8_t>(j, i); };
+      int j = 0;
+      while (j < len) {
+        if (value(j) < T) {
+          ++j;
+          continue;
+        }
+        int k = j;
+        while (k + 1 < len && value(k + 1) >= T) ++k;
+        if (k - j + 1 <= rule.max_width) on_run(i, j, k);
+        j = k + 1;
+      }
+    }
+  };
+  // Run length through a pixel along the other direction (above the threshold).
+  auto across = [&](bool transpose, int i, int m) {
+    const int y = transpose ? i : m, x = transpose ? m : i;  // the pixel
+    int a = 0, b = 0;
+    if (transpose) {  // a row run: measure down the column
+      while (y - a - 1 >= 0 && sm.at<uint8_t>(y - a - 1, x) >= T) ++a;
+      while (y + b + 1 < H && sm.at<uint8_t>(y + b + 1, x) >= T) ++b;
+    } else {
+      while (x - a - 1 >= 0 && sm.at<uint8_t>(y, x - a - 1) >= T) ++a;
+      while (x + b + 1 < W && sm.at<uint8_t>(y, x + b + 1) >= T) ++b;
+    }
+    return a + b + 1;
+  };
+  for (bool t : {false, true}) {
+    const auto& on = t ? by_row : by_col;
+    runs(t, [&](int i, int j, int k) {
+      const int mid = (j + k) / 2;
+      // A crossing runs across the line: not longer than the run the other way through its
+      // middle (a run along a thin line, split by speckle, is not a crossing).
+      if (k - j + 1 > across(t, i, mid)) return;
+      ++out.crossings;
+      const auto& cs = on[static_cast<size_t>(i)];
+      const bool hit = std::any_of(cs.begin(), cs.end(), [&](float c) { return c >= j - tol && c <= k + tol; });
+      if (hit) ++out.covered;
+      for (int m = j; m <= k; ++m) {
+        (t ? out.mask.at<uint8_t>(i, m) : out.mask.at<uint8_t>(m, i)) = 255;
+        if (!hit) (t ? out.missed.at<uint8_t>(i, m) : out.missed.at<uint8_t>(m, i)) = 255;
+      }
+    });
+  }
+  cv::Mat near;
+  const int r = static_cast<int>(std::ceil(tol));
+  cv::dilate(out.mask | lit, near, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1)));
+  for (const auto& p : centres) {
+    ++out.centres;
+    const long u = std::lround(p.u), v = std::lround(p.v);
+    if (u < 0 || v < 0 || u >= W || v >= H || !near.at<uint8_t>(static_cast<int>(v), static_cast<int>(u))) ++out.false_centres;
+  }
+  return out;
 }
 
 }  // namespace cellsight

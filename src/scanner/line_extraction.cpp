@@ -5,19 +5,30 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "ridge_line.hpp"
+
 namespace cellsight {
 
 LineExtractionConfig::Estimator LineExtractionConfig::parseEstimator(const std::string& name) {
+  if (name == "ridge" || name == "steger") return Estimator::kRidge;
   if (name == "run_centre" || name == "run_center" || name == "thesis") return Estimator::kRunCentre;
   if (name == "centroid" || name == "cog") return Estimator::kCentroid;
   if (name == "gaussian3" || name == "gaussian") return Estimator::kGaussian3;
   throw std::invalid_argument("unknown line estimator '" + name +
-                              "' (use run_centre, centroid or gaussian3)");
+                              "' (use ridge, run_centre, centroid or gaussian3)");
 }
 
-namespace {
+const char* LineExtractionConfig::estimatorName(Estimator e) {
+  switch (e) {
+    case Estimator::kRidge: return "ridge";
+    case Estimator::kRunCentre: return "run_centre";
+    case Estimator::kCentroid: return "centroid";
+    case Estimator::kGaussian3: return "gaussian3";
+  }
+  return "?";
+}
 
-double backgroundLevel(const cv::Mat& img, double percentile) {
+double detail::backgroundLevel(const cv::Mat& img, double percentile) {
   // Histogram of every 4th row: the line covers well under 2 % of the pixels.
   uint32_t hist[256] = {0};
   uint32_t n = 0;
@@ -35,6 +46,8 @@ double backgroundLevel(const cv::Mat& img, double percentile) {
   return 255;
 }
 
+namespace {
+
 void dropEdges(std::vector<LinePoint>& pts, const LineExtractionConfig& c, int& dropped) {
   if (c.segment_erode <= 0 && c.min_segment <= 1) return;
   std::vector<LinePoint> kept;
@@ -47,8 +60,11 @@ void dropEdges(std::vector<LinePoint>& pts, const LineExtractionConfig& c, int& 
       ++end;
     const size_t n = end - start, e = static_cast<size_t>(std::max(0, c.segment_erode));
     if (n >= static_cast<size_t>(std::max(1, c.min_segment)) && n > 2 * e) {
-      kept.insert(kept.end(), pts.begin() + static_cast<long>(start + e),
-                  pts.begin() + static_cast<long>(end - e));
+      const int id = kept.empty() ? 0 : kept.back().segment + 1;
+      for (size_t i = start + e; i < end - e; ++i) {
+        kept.push_back(pts[i]);
+        kept.back().segment = id;
+      }
     }
     start = end;
   }
@@ -129,10 +145,16 @@ std::vector<LinePoint> extractLine(const cv::Mat& image, const LineExtractionCon
   } else {
     throw std::invalid_argument("extractLine: image must be 8-bit mono or 3-channel");
   }
-  if (!c.line_along_rows) img = img.t();
-
   LineExtractionStats st;
-  st.background = backgroundLevel(img, c.background_percentile);
+  if (c.estimator == LineExtractionConfig::Estimator::kRidge) {
+    st.background = detail::backgroundLevel(img, c.background_percentile);
+    auto pts = detail::extractRidge(img, c, st);
+    st.found = static_cast<int>(pts.size());
+    if (stats_out) *stats_out = st;
+    return pts;
+  }
+  if (!c.line_along_rows) img = img.t();
+  st.background = detail::backgroundLevel(img, c.background_percentile);
   const int W = img.cols, H = img.rows;
   const float bg = static_cast<float>(st.background);
   // Pass 1 (row-major, cache friendly, branch-free so the compiler vectorises it): per-column
@@ -243,6 +265,7 @@ std::vector<LinePoint> extractLine(const cv::Mat& image, const LineExtractionCon
         v = s > 0 ? sv / s : 0.5f * (a + b);
         break;
       }
+      case LineExtractionConfig::Estimator::kRidge:  // handled above
       case LineExtractionConfig::Estimator::kGaussian3: {
         const int p = am[u];
         if (peak >= 255.f || p == 0 || p == H - 1) {
@@ -269,8 +292,12 @@ std::vector<LinePoint> extractLine(const cv::Mat& image, const LineExtractionCon
   smooth(pts, c);
   st.found = static_cast<int>(pts.size());
   if (!c.line_along_rows) {
-    for (auto& p : pts) std::swap(p.u, p.v);
+    for (auto& p : pts) {
+      std::swap(p.u, p.v);
+      std::swap(p.nx, p.ny);
+    }
   }
+  if (!pts.empty()) st.segments = pts.back().segment + 1;
   if (stats_out) *stats_out = st;
   return pts;
 }

@@ -1,5 +1,7 @@
 #include "cellsight/scanner/scanner_config.hpp"
 
+#include <cmath>
+
 #include "cellsight/common/yaml_reader.hpp"
 
 namespace cellsight {
@@ -25,7 +27,7 @@ ScannerSettings loadScannerSettings(const std::string& path) {
     YamlMap l = m.getMap("line");
     LineExtractionConfig& c = s.line;
     try {
-      c.estimator = LineExtractionConfig::parseEstimator(l.getString("estimator", "centroid"));
+      c.estimator = LineExtractionConfig::parseEstimator(l.getString("estimator", LineExtractionConfig::estimatorName(c.estimator)));
     } catch (const std::invalid_argument& e) {
       l.fail("estimator", e.what());
     }
@@ -49,6 +51,15 @@ ScannerSettings loadScannerSettings(const std::string& path) {
     if (c.smoothing_degree < 0 || c.smoothing_degree > 3) l.fail("smoothing_degree", "must be 0..3");
     c.smoothing_half_window = l.getInt("smoothing_half_window", c.smoothing_half_window);
     if (c.smoothing_half_window < 1) l.fail("smoothing_half_window", "must be >= 1");
+    c.ridge_sigma = l.getDouble("ridge_sigma", c.ridge_sigma);
+    if (!(c.ridge_sigma >= 0.5 && c.ridge_sigma <= 10)) l.fail("ridge_sigma", "must lie in [0.5, 10] (pixels)");
+    c.ridge_gaussian_profile = l.getBool("ridge_gaussian_profile", c.ridge_gaussian_profile);
+    c.ridge_max_isotropy = l.getDouble("ridge_max_isotropy", c.ridge_max_isotropy);
+    if (!(c.ridge_max_isotropy > 0 && c.ridge_max_isotropy <= 1)) l.fail("ridge_max_isotropy", "must lie in (0, 1]");
+    c.link_max_gap = l.getDouble("link_max_gap", c.link_max_gap);
+    if (!(c.link_max_gap >= 1 && c.link_max_gap <= 10)) l.fail("link_max_gap", "must lie in [1, 10] (pixels)");
+    c.link_max_angle = l.getDouble("link_max_angle", c.link_max_angle);
+    if (!(c.link_max_angle > 0 && c.link_max_angle <= M_PI / 2)) l.fail("link_max_angle", "must lie in (0, pi/2] (radians)");
     if (const auto bad = checkLineThresholds(lineThresholdsOf(c)); !bad.first.empty()) l.fail(bad.first, bad.second);
     l.finish();
   }

@@ -1,7 +1,10 @@
 // Scanner calibration from files (each result written atomically; residuals reported as JSON).
 // Usage: cellsight_calibrate SUBCOMMAND [OPTIONS]   (--help on the tool and on each subcommand)
 //   intrinsics  --images <dir or files...> --board 9x6 --square 0.025 [--model k1|full]
-//               [--fix-aspect] [--name scanner_camera] --out camera.yaml
+//               [--pattern chessboard|circles|acircles|charuco [--marker 0.018 --dictionary 4x4_50]]
+//               [--refine adaptive|fixed|sb] [--view-rms-limit 1.0 [--drop-high-rms]]
+//               [--fix-aspect] [--name scanner_camera] [--corners corners.json] [--plot views.png]
+//               --out camera.yaml   (ROS camera_calibration YAML, as camera drivers load it)
 //   extrinsics  --camera camera.yaml --image pattern.png --board 9x6 --square 0.025
 //               --taught taught.yaml [--parent base_link] [--child scanner_camera_optical] --out pose.yaml
 //               taught.yaml: {origin: [x,y,z], on_x: [x,y,z], in_xy: [x,y,z]} (metres, parent frame):
@@ -16,6 +19,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "cellsight/scanner/calibrate.hpp"
 #include "cellsight/common/calibration.hpp"
@@ -31,8 +35,9 @@ namespace {
 struct Options {
   std::vector<std::string> images;
   std::string board, model = "full", name = "scanner_camera", out;
-  double square = 0;
-  bool fix_aspect = false;
+  std::string pattern = "chessboard", refine = "adaptive", dictionary = "4x4_50", corners, plot;
+  double square = 0, marker = 0, view_rms_limit = 1.0;
+  bool fix_aspect = false, drop_high_rms = false;
   std::string camera, image, taught, parent = "base_link", child_camera = "scanner_camera_optical";
   std::string camera_pose, observations, method = "lsq", flange = "flange", child_laser = "laser";
 };
@@ -54,7 +59,46 @@ ChessboardSpec board(const Options& o) {
   ChessboardSpec b;
   b.inner_corners = parseBoard(o.board);
   b.square_size = o.square;
+  b.kind = ChessboardSpec::parseKind(o.pattern);
+  b.refinement = ChessboardSpec::parseRefinement(o.refine);
+  b.marker_size = o.marker;
+  b.dictionary = o.dictionary;
+  if (b.kind == ChessboardSpec::Kind::kCharuco && !(o.marker > 0 && o.marker < o.square)) {
+    throw std::invalid_argument("--pattern charuco needs --marker (the marker side in metres, smaller than --square)");
+  }
   return b;
+}
+
+/// Per-view reprojection RMS as a bar chart (PNG): the threshold as a line, flagged views red.
+cv::Mat viewPlot(const IntrinsicsResult& r, double limit) {
+  const int n = static_cast<int>(r.per_view_rms_px.size()), bar = std::max(6, std::min(40, 900 / std::max(1, n)));
+  const int W = 80 + n * bar + 20, H = 360, top = 30, bottom = H - 50;
+  double ymax = limit * 1.2;
+  for (double v : r.per_view_rms_px) ymax = std::max(ymax, v * 1.1);
+  cv::Mat img(H, W, CV_8UC3, cv::Scalar(255, 255, 255));
+  auto y = [&](double v) { return static_cast<int>(bottom - (bottom - top) * v / ymax); };
+  cv::line(img, {70, top}, {70, bottom}, cv::Scalar(0, 0, 0));
+  cv::line(img, {70, bottom}, {W - 10, bottom}, cv::Scalar(0, 0, 0));
+  for (int k = 0; k <= 4; ++k) {
+    const double v = ymax * k / 4;
+    char t[32];
+    std::snprintf(t, sizeof t, "%.2f", v);
+    cv::putText(img, t, {10, y(v) + 4}, cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(0, 0, 0));
+  }
+  for (int i = 0; i < n; ++i) {
+    const double v = r.per_view_rms_px[static_cast<size_t>(i)];
+    const cv::Scalar c = v > limit ? cv::Scalar(40, 40, 220) : cv::Scalar(180, 120, 40);
+    cv::rectangle(img, {72 + i * bar, y(v)}, {72 + (i + 1) * bar - 2, bottom - 1}, c, cv::FILLED);
+    if (n <= 40 || i % 5 == 0) {
+      cv::putText(img, std::to_string(i), {72 + i * bar, bottom + 15}, cv::FONT_HERSHEY_SIMPLEX, 0.35, cv::Scalar(0, 0, 0));
+    }
+  }
+  cv::line(img, {70, y(limit)}, {W - 10, y(limit)}, cv::Scalar(40, 40, 220), 1, cv::LINE_AA);
+  char title[128];
+  std::snprintf(title, sizeof title, "reprojection RMS per view [px]; overall %.3f px; red: above %.2f px", r.rms_px, limit);
+  cv::putText(img, title, {10, 18}, cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
+  cv::putText(img, "view (order of views_used)", {W / 2 - 80, H - 15}, cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(0, 0, 0));
+  return img;
 }
 
 void saveTransform(const std::string& path, const std::string& parent, const std::string& child,
@@ -72,19 +116,46 @@ void saveTransform(const std::string& path, const std::string& parent, const std
 int intrinsics(const Options& o) {
   const auto files = listImages(o.images);
   if (files.empty()) throw std::invalid_argument("--images: no image files given or found");
-  const DistortionModel model = parseDistortionModel(o.model);
-  IntrinsicsResult r = calibrateIntrinsics(files, board(o), model, o.fix_aspect);
+  IntrinsicsOptions opt;
+  opt.model = parseDistortionModel(o.model);
+  opt.fix_aspect_ratio = o.fix_aspect;
+  opt.view_rms_threshold_px = o.view_rms_limit;
+  opt.drop_high_rms_views = o.drop_high_rms;
+  IntrinsicsResult r = calibrateIntrinsics(files, board(o), opt);
   r.camera.camera_name = o.name;
   const std::string& out = o.out;
   saveCameraInfoYaml(out, r.camera);
   nlohmann::json j = {{"output", out},
                       {"model", o.model},
+                      {"pattern", o.pattern},
                       {"rms_px", r.rms_px},
-                      {"views_used", r.used.size()},
+                      {"views_used", r.used},
                       {"views_rejected", r.rejected},
                       {"per_view_rms_px", r.per_view_rms_px},
+                      {"high_rms_views", r.high_rms_views},
+                      {"dropped", r.dropped},
+                      {"warnings", r.warnings},
                       {"fx", r.camera.fx}, {"fy", r.camera.fy}, {"cx", r.camera.cx}, {"cy", r.camera.cy},
                       {"dist", r.camera.dist}};
+  if (!o.corners.empty()) {
+    nlohmann::json views = nlohmann::json::array();
+    for (size_t i = 0; i < r.used.size(); ++i) {
+      nlohmann::json pts = nlohmann::json::array();
+      const PatternView& v = r.detections[i];
+      for (size_t k = 0; k < v.image.size(); ++k) {
+        pts.push_back({{"id", v.ids[k]}, {"u", v.image[k].x}, {"v", v.image[k].y},
+                       {"board_m", {v.object[k].x, v.object[k].y}}});
+      }
+      views.push_back({{"file", r.used[i]}, {"rms_px", r.per_view_rms_px[i]}, {"points", pts}});
+    }
+    writeFileAtomic(o.corners, nlohmann::json({{"pattern", o.pattern}, {"board", o.board}, {"views", views}}).dump(1) + "\n");
+  }
+  if (!o.plot.empty()) {
+    std::vector<uchar> png;
+    cv::imencode(".png", viewPlot(r, opt.view_rms_threshold_px), png);
+    writeFileAtomic(o.plot, std::string(png.begin(), png.end()));
+  }
+  for (const auto& w : r.warnings) std::cerr << "warning: " << w << "\n";
   std::cout << j.dump(2) << "\n";
   return 0;
 }
@@ -146,11 +217,43 @@ int main(int argc, char** argv) {
   in->add_option("--images", o.images, "image folders (*.png, *.jpg, *.jpeg, sorted) and/or image files")
       ->required()
       ->check(CLI::ExistingPath);
-  in->add_option("--board", o.board, "inner corners per row x column, e.g. 9x6")->required()->check(board_check);
-  in->add_option("--square", o.square, "chessboard square size [m]")->required()->check(positive());
+  in->add_option("--board", o.board,
+                 "chessboard: inner corners per row x column (e.g. 9x6); circles: centres per row x column; charuco: "
+                 "squares per row x column")
+      ->required()
+      ->check(board_check);
+  in->add_option("--square", o.square, "square size (circles: centre spacing) [m]")->required()->check(positive());
+  in->add_option("--pattern", o.pattern, "calibration target")
+      ->check(CLI::IsMember({"chessboard", "circles", "acircles", "charuco"}))
+      ->capture_default_str();
+  in->add_option("--marker", o.marker, "charuco: marker side [m]")->check(positive());
+  in->add_option("--dictionary", o.dictionary, "charuco: ArUco dictionary (4x4_50, 5x5_100, 6x6_250, original, ...)")
+      ->check(cellsight_tools::parsedBy([](const std::string& d) {
+        ChessboardSpec b;
+        b.kind = ChessboardSpec::Kind::kCharuco;
+        b.dictionary = d;
+        b.square_size = 1;
+        b.marker_size = 0.5;
+        PatternView v;
+        detectPattern(cv::Mat(8, 8, CV_8UC1, cv::Scalar(0)), b, v);  // throws for an unknown name
+      }, "DICTIONARY"))
+      ->capture_default_str();
+  in->add_option("--refine", o.refine,
+                 "chessboard corners: adaptive (cornerSubPix window from the square size in px), fixed (winSize 11x11, "
+                 "a 23x23 window), sb "
+                 "(findChessboardCornersSB)")
+      ->check(CLI::IsMember({"adaptive", "fixed", "sb"}))
+      ->capture_default_str();
   in->add_option("--model", o.model, "distortion model")->check(CLI::IsMember({"k1", "full"}))->capture_default_str();
+  in->add_option("--view-rms-limit", o.view_rms_limit,
+                 "views reprojecting worse than max(this, 3 x the median view) are reported [px]")
+      ->check(positive())
+      ->capture_default_str();
+  in->add_flag("--drop-high-rms", o.drop_high_rms, "drop the reported views and calibrate again");
   in->add_flag("--fix-aspect", o.fix_aspect, "fix fx/fy");
   in->add_option("--name", o.name, "camera_name written to the file")->capture_default_str();
+  in->add_option("--corners", o.corners, "write the detected corners per view (JSON)");
+  in->add_option("--plot", o.plot, "write the per-view reprojection RMS plot (PNG)");
   in->add_option("--out", o.out, "camera intrinsics YAML to write")->required();
 
   CLI::App* ex = app.add_subcommand(

@@ -19,19 +19,20 @@ TEST(ScannerAcceptance, LineCentreWithinFiveHundredthsOfAPixelAtDefaultNoise) {
   Scene s = loadScene(kRoot + "/config/scenes/demo.yaml");
   s.objects.clear();
   ScannerRenderer r(std::make_shared<CellGeometry>(s));
-  LineExtractionConfig c;  // defaults: centroid + quadratic smoothing
+  LineExtractionConfig c;  // defaults: ridge + quadratic smoothing
   double s2 = 0;
   size_t n = 0;
   for (int f = 0; f < 3; ++f) {
     Eigen::Isometry3d F = s.robot.home;
     F.translation().y() = -0.20 + 0.03 * f;
     const LineCentreErrors e = lineCentreErrors(r, F, c, 77 + f);
-    EXPECT_GT(e.columns, 0.9 * e.expected);
-    s2 += e.rms_px * e.rms_px * e.columns;
-    n += e.columns;
+    EXPECT_GT(e.coverage, 0.9);
+    EXPECT_LT(e.false_share, 0.02);
+    s2 += e.rms_px * e.rms_px * e.points;
+    n += e.points;
   }
   const double rms = std::sqrt(s2 / n);
-  std::printf("line-centre RMS at default noise: %.4f px over %zu columns\n", rms, n);
+  std::printf("line-centre RMS at default noise: %.4f px over %zu centres\n", rms, n);
   EXPECT_LT(rms, 0.05);
 }
 

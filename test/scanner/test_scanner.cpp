@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <random>
 
 #include "cellsight/scanner/accuracy.hpp"
@@ -29,18 +30,97 @@ cv::Mat syntheticLine(int w, int h, double v0, double slope, double sigma, doubl
   }
   return img;
 }
+/// A line through (cx, cy) at `deg` to the image rows, or (radius > 0) a circle of that radius
+/// around (cx, cy); Gaussian profile across it (sigma px), 4×4 supersampled.
+cv::Mat syntheticTrace(int w, int h, double cx, double cy, double deg, double radius, double sigma, double peak,
+                       double bg, double noise = 0, unsigned seed = 1) {
+  cv::Mat img(h, w, CV_8UC1);
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0, 1);
+  const double a = deg * M_PI / 180, nx = -std::sin(a), ny = std::cos(a);
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      double acc = 0;
+      for (int i = 0; i < 4; ++i) {
+        for (int j = 0; j < 4; ++j) {
+          const double x = u - 0.375 + 0.25 * i - cx, y = v - 0.375 + 0.25 * j - cy;
+          const double d = radius > 0 ? std::hypot(x, y) - radius : x * nx + y * ny;
+          acc += std::exp(-d * d / (2 * sigma * sigma));
+        }
+      }
+      img.at<uint8_t>(v, u) = cv::saturate_cast<uint8_t>(bg + peak * acc / 16 + (noise > 0 ? noise * n(rng) : 0));
+    }
+  }
+  return img;
+}
+
 }  // namespace
+
+TEST(LineExtraction, RidgeFindsLinesAtAnyAngleWithTheirNormal) {
+  for (double deg : {0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0, 135.0}) {
+    const cv::Mat img = syntheticTrace(240, 240, 120.3, 119.6, deg, 0, 1.2, 180, 10);
+    LineExtractionConfig c;  // default: ridge
+    c.smoothing_degree = 0;
+    LineExtractionStats st;
+    const auto pts = extractLine(img, c, &st);
+    const double a = deg * M_PI / 180, nx = -std::sin(a), ny = std::cos(a);
+    // The line crosses the 240-px square (clipped by the ridge's border of 3σ and the erosion).
+    EXPECT_GT(pts.size(), 200u) << deg << " deg";
+    EXPECT_EQ(st.segments, 1) << deg << " deg";
+    double max_err = 0, min_dot = 1;
+    for (const auto& p : pts) {
+      max_err = std::max(max_err, std::abs((p.u - 120.3) * nx + (p.v - 119.6) * ny));
+      min_dot = std::min(min_dot, std::abs(p.nx * nx + p.ny * ny));
+      EXPECT_NEAR(p.width, 2.3548 * 1.2, 0.6);
+    }
+    EXPECT_LT(max_err, 0.03) << deg << " deg";
+    EXPECT_GT(min_dot, 0.999) << deg << " deg";
+  }
+}
+
+TEST(LineExtraction, RidgeFollowsACurvedTraceAndTheColumnMethodDoesNot) {
+  // A circle of radius 90 px: every direction, slopes up to vertical.
+  const cv::Mat img = syntheticTrace(240, 240, 120, 120, 0, 90, 1.2, 180, 10, 2.0, 5);
+  LineExtractionConfig ridge;
+  LineExtractionStats st;
+  const auto pts = extractLine(img, ridge, &st);
+  double s2 = 0;
+  for (const auto& p : pts) s2 += std::pow(std::hypot(p.u - 120, p.v - 120) - 90, 2);
+  const double rms = std::sqrt(s2 / static_cast<double>(pts.size()));
+  EXPECT_LT(rms, 0.05);
+  EXPECT_GT(pts.size(), 0.95 * 2 * M_PI * 90 * 0.9);  // centres at ≥ 0.9 per px of arc length
+  EXPECT_LE(st.segments, 2);
+  LineExtractionConfig cols;
+  cols.estimator = LineExtractionConfig::Estimator::kCentroid;
+  // One centre per column at most, and the steep parts lost to the jump limit.
+  EXPECT_LT(extractLine(img, cols).size(), 0.5 * pts.size());
+}
+
+TEST(LineExtraction, RidgeRejectsSpeckleAndShortStreaks) {
+  cv::Mat img(200, 200, CV_8UC1, cv::Scalar(10));
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> jitter(-2, 2);
+  for (int v = 8; v < 192; v += 12) {  // 256 separate speckle blobs
+    for (int u = 8; u < 192; u += 12) cv::circle(img, {u + jitter(rng), v + jitter(rng)}, 1, cv::Scalar(200), cv::FILLED);
+  }
+  cv::line(img, {20, 20}, {23, 21}, cv::Scalar(200));  // a 4-px streak
+  LineExtractionConfig c;
+  LineExtractionStats st;
+  const auto pts = extractLine(img, c, &st);
+  EXPECT_EQ(pts.size(), 0u) << "speckle should not become a line";
+  EXPECT_GT(st.not_ridge, 200);
+}
 
 TEST(LineExtraction, EveryEstimatorFindsTheKnownCentreNoiseFree) {
   const cv::Mat img = syntheticLine(400, 200, 80.3, 0.05, 1.2, 200, 10);
-  for (auto est : {LineExtractionConfig::Estimator::kRunCentre, LineExtractionConfig::Estimator::kCentroid,
-                   LineExtractionConfig::Estimator::kGaussian3}) {
+  for (auto est : {LineExtractionConfig::Estimator::kRidge, LineExtractionConfig::Estimator::kRunCentre,
+                   LineExtractionConfig::Estimator::kCentroid, LineExtractionConfig::Estimator::kGaussian3}) {
     LineExtractionConfig c;
     c.estimator = est;
     c.smoothing_degree = 0;
     LineExtractionStats st;
     const auto pts = extractLine(img, c, &st);
-    ASSERT_GT(pts.size(), 380u);
+    ASSERT_GT(pts.size(), 370u);
     double max_err = 0;
     for (const auto& p : pts) max_err = std::max(max_err, std::abs(p.v - (80.3 + 0.05 * p.u)));
     EXPECT_LT(max_err, 0.06) << "estimator " << static_cast<int>(est);
@@ -50,15 +130,21 @@ TEST(LineExtraction, EveryEstimatorFindsTheKnownCentreNoiseFree) {
 
 TEST(LineExtraction, SmoothingReducesNoiseOnAStraightLine) {
   const cv::Mat img = syntheticLine(600, 200, 100.0, 0.02, 1.2, 120, 10, 4.0, 3);
-  auto rms = [&](int degree) {
+  auto rms = [&](LineExtractionConfig::Estimator e, int degree) {
     LineExtractionConfig c;
+    c.estimator = e;
     c.smoothing_degree = degree;
     double s2 = 0;
     const auto pts = extractLine(img, c);
     for (const auto& p : pts) s2 += std::pow(p.v - (100.0 + 0.02 * p.u), 2);
     return std::sqrt(s2 / pts.size());
   };
-  EXPECT_LT(rms(2), 0.6 * rms(0));
+  using E = LineExtractionConfig::Estimator;
+  EXPECT_LT(rms(E::kCentroid, 2), 0.6 * rms(E::kCentroid, 0));
+  // The ridge's centres are already smoothed along the line by its Gaussian (σ 1.5 px), so the
+  // polyline fit gains less — but it ends below the smoothed column centroid.
+  EXPECT_LT(rms(E::kRidge, 2), 0.85 * rms(E::kRidge, 0));
+  EXPECT_LT(rms(E::kRidge, 2), rms(E::kCentroid, 2));
 }
 
 TEST(LineExtraction, ReflectionMakesAColumnAmbiguous) {
@@ -67,6 +153,7 @@ TEST(LineExtraction, ReflectionMakesAColumnAmbiguous) {
     for (int v = 150; v < 153; ++v) img.at<uint8_t>(v, u) = 230;  // a strong second spot
   }
   LineExtractionConfig c;
+  c.estimator = LineExtractionConfig::Estimator::kCentroid;
   c.segment_erode = 0;
   LineExtractionStats st;
   const auto pts = extractLine(img, c, &st);
@@ -79,21 +166,36 @@ TEST(LineExtraction, EdgeFilterDropsSegmentEndsAndJumps) {
   cv::Mat step = syntheticLine(200, 200, 80.0, 0.0, 1.2, 200, 10);
   step.colRange(100, 200).copyTo(img.colRange(100, 200));  // depth edge at u = 100
   LineExtractionConfig c;
+  c.estimator = LineExtractionConfig::Estimator::kCentroid;
   c.smoothing_degree = 0;
   LineExtractionStats st;
   const auto pts = extractLine(img, c, &st);
   EXPECT_EQ(st.edge, 8);  // 2 at each end of two segments
+  EXPECT_EQ(st.segments, 2);
   for (const auto& p : pts) EXPECT_FALSE(p.u >= 98 && p.u <= 101);
+  // The ridge: the same two segments, cut where linking finds no continuation, ends eroded.
+  LineExtractionConfig ridge;
+  ridge.smoothing_degree = 0;
+  LineExtractionStats rs;
+  const auto rp = extractLine(img, ridge, &rs);
+  EXPECT_EQ(rs.segments, 2);
+  for (const auto& p : rp) EXPECT_FALSE(p.u >= 98 && p.u <= 101) << p.u << " " << p.v;
+  for (const auto& p : rp) EXPECT_NEAR(p.v, p.u < 100 ? 50.0 : 80.0, 0.05);
 }
 
 TEST(LineExtraction, BadFramesGiveNoPointsOrAClearError) {
   LineExtractionConfig c;
+  c.estimator = LineExtractionConfig::Estimator::kCentroid;
   LineExtractionStats st;
   cv::Mat dark(100, 100, CV_8UC1, cv::Scalar(12));
   EXPECT_TRUE(extractLine(dark, c, &st).empty());
   EXPECT_EQ(st.no_line, 100);
   cv::Mat saturated(100, 100, CV_8UC1, cv::Scalar(255));
   EXPECT_TRUE(extractLine(saturated, c).empty());
+  LineExtractionConfig ridge;
+  EXPECT_TRUE(extractLine(dark, ridge).empty());
+  EXPECT_TRUE(extractLine(saturated, ridge).empty());
+  EXPECT_TRUE(extractLine(cv::Mat(3, 3, CV_8UC1, cv::Scalar(200)), ridge).empty());  // smaller than the kernel
   EXPECT_THROW(extractLine(cv::Mat(10, 10, CV_16UC1), c), std::invalid_argument);
   EXPECT_THROW(extractLine(cv::Mat(), c), std::invalid_argument);
   cv::Mat rgb(100, 100, CV_8UC3, cv::Scalar(0, 0, 0));
@@ -111,6 +213,7 @@ TEST(LineExtraction, ColourChannelAndColumnOrientation) {
   c.channel = 1;
   EXPECT_TRUE(extractLine(rgb, c).empty());
   LineExtractionConfig cols;
+  cols.estimator = LineExtractionConfig::Estimator::kCentroid;
   cols.line_along_rows = false;
   const auto pts = extractLine(mono.t(), cols);
   ASSERT_GT(pts.size(), 280u);

@@ -38,17 +38,49 @@ double pointTriangleDistance(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
                              const Eigen::Vector3d& b, const Eigen::Vector3d& c);
 
 
-/// Line-centre accuracy on a rendered line with a known centre: the scene's objects are removed,
-/// the flange is placed so the sheet crosses the bare table, and each extracted centre is
-/// compared with the analytic projection of the sheet ∩ table line (px, along the search
-/// direction). Columns within 10 % of the line's ends are skipped (fan cut-off).
+/// Line-centre accuracy on a rendered frame whose truth is known: for every extracted centre
+/// (u, v) the ray through it meets the true surface at X; f(u, v) = signed distance of X to the
+/// true light sheet, and the centre's error is f / |∇f| (px, across the line, first order, from
+/// rays at ±0.5 px) — valid for lines in any direction and curved traces. Centres whose five
+/// rays do not all meet the same surface, or that lie where the noise-free laser does not reach
+/// (shadows, depth edges), are not compared. Coverage: lineCoverage() of the centres against the
+/// noise-free laser render (LineCoverageRule{20 grey levels}).
 struct LineCentreErrors {
-  size_t columns = 0;  ///< columns with a centre, compared
-  size_t expected = 0; ///< columns the line crosses (10 % margins excluded)
-  double rms_px = 0, max_px = 0, mean_px = 0;
+  size_t points = 0;    ///< centres compared
+  size_t centres = 0;   ///< centres extracted
+  double coverage = 0;  ///< share of the noise-free trace's row/column crossings with a centre
+  double false_share = 0;  ///< share of centres away from the noise-free trace
+  double rms_px = 0, max_px = 0, mean_px = 0, p95_px = 0;
 };
-LineCentreErrors lineCentreErrors(const ScannerRenderer& bare_renderer,
+LineCentreErrors lineCentreErrors(const ScannerRenderer& renderer,
                                   const Eigen::Isometry3d& T_base_flange,
                                   const LineExtractionConfig& config, uint64_t seed);
+
+/// A reference for "where is a line visible", independent of the extractor: after Gaussian
+/// smoothing and a white top-hat (element 2·max_width + 1: the local background under a glow or
+/// a lit area is removed; skipped when `background` ≥ 0 is given), every image column and every
+/// image row is split into runs of pixels at least `min_contrast` above the background; a run no
+/// wider than `max_width`, and not longer than the run the other way through its middle, is one
+/// crossing of a visible line (a wider run is a lit area; a longer one runs along the line). A centre is false when no
+/// pixel within the tolerance reaches half the contrast (nothing there; between half and full
+/// contrast, or in a lit area, the rule does not judge).
+struct LineCoverageRule {
+  double min_contrast = 40;
+  int max_width = 16;
+  double smooth_sigma = 1.0;   ///< px; 0: none
+  double background = -1;     ///< ≥ 0: a fixed background level instead of the top-hat
+  double tolerance_px = 2.0;   ///< a centre covers a crossing within the run ± this
+};
+struct LineCoverage {
+  long crossings = 0;      ///< column and row crossings of a visible line
+  long covered = 0;        ///< crossings with a centre in them
+  long centres = 0;
+  long false_centres = 0;  ///< centres with nothing at half the contrast within the tolerance
+  cv::Mat mask;            ///< CV_8UC1, 255 on the crossings' pixels (for an overlay)
+  cv::Mat missed;          ///< CV_8UC1, 255 on the pixels of crossings without a centre
+  double coverage() const { return crossings ? double(covered) / double(crossings) : 0.0; }
+  double falseShare() const { return centres ? double(false_centres) / double(centres) : 0.0; }
+};
+LineCoverage lineCoverage(const cv::Mat& mono, const std::vector<LinePoint>& centres, const LineCoverageRule& rule);
 
 }  // namespace cellsight

@@ -14,9 +14,36 @@
 
 namespace cellsight {
 
+/// A calibration target (the name is historical: it covers every pattern kind).
+///  - chessboard: `inner_corners` per row, per column; `square_size`;
+///  - circles / asymmetric circles (OpenCV's layouts): centres per row, per column in
+///    `inner_corners`; `square_size` = centre spacing (asymmetric: centre (i, j) at
+///    ((2j + i mod 2)·s, i·s), as OpenCV's calibration sample);
+///  - ChArUco: squares per row, per column in `inner_corners`, `square_size`, `marker_size`,
+///    `dictionary` (e.g. "4x4_50", "5x5_100", "6x6_250"); partial views give the corners they show.
 struct ChessboardSpec {
-  cv::Size inner_corners{9, 6};  ///< corners per row, per column
+  enum class Kind { kChessboard, kCircles, kAsymmetricCircles, kCharuco };
+  /// Chessboard corner refinement: kAdaptive: cornerSubPix with a window from the measured square
+  /// size in pixels; kFixed: cornerSubPix with OpenCV's sample winSize (11, 11), a 23 × 23 window;
+  /// kSectorBased: findChessboardCornersSB's own.
+  enum class Refinement { kAdaptive, kFixed, kSectorBased };
+  cv::Size inner_corners{9, 6};  ///< corners per row, per column (see above for other kinds)
   double square_size = 0.025;    ///< metres
+  Kind kind = Kind::kChessboard;
+  Refinement refinement = Refinement::kAdaptive;
+  double marker_size = 0;        ///< ChArUco marker side, metres
+  std::string dictionary = "4x4_50";
+
+  static Kind parseKind(const std::string& name);              ///< chessboard|circles|acircles|charuco
+  static Refinement parseRefinement(const std::string& name);  ///< adaptive|fixed|sb
+};
+
+/// One view's detected pattern: image points, their board coordinates (metres, z = 0) and ids
+/// (the index of each point on the full board; all of them unless the view is partial).
+struct PatternView {
+  std::vector<cv::Point2f> image;
+  std::vector<cv::Point3f> object;
+  std::vector<int> ids;
 };
 
 enum class DistortionModel {
@@ -25,25 +52,48 @@ enum class DistortionModel {
 };
 DistortionModel parseDistortionModel(const std::string& name);  ///< "k1" | "full"
 
+struct IntrinsicsOptions {
+  DistortionModel model = DistortionModel::kFull;
+  bool fix_aspect_ratio = false;  ///< fx = fy
+  /// Views whose reprojection RMS exceeds max(this, 3 × the median view's) are reported in
+  /// `high_rms_views`; with `drop_high_rms_views` they are dropped and the camera recalibrated.
+  double view_rms_threshold_px = 1.0;
+  bool drop_high_rms_views = false;
+};
+
 struct IntrinsicsResult {
   CameraIntrinsics camera;
-  double rms_px = 0;                    ///< reprojection RMS over all corners
+  double rms_px = 0;                    ///< reprojection RMS over all points of the used views
   std::vector<double> per_view_rms_px;  ///< for the used images
   std::vector<std::string> used, rejected;  ///< rejected: no board found (or unreadable)
+  std::vector<PatternView> detections;  ///< per used image: what was detected
+  std::vector<std::string> high_rms_views;  ///< "name (x.xx px)", dropped if asked
+  std::vector<std::string> dropped;         ///< views dropped for their RMS
+  std::vector<std::string> warnings;        ///< the result looks suspect: why, and what to do
 };
 
 /// Finds the chessboard corners (sub-pixel) in one grey image; false if not found.
 bool findChessboard(const cv::Mat& grey, const ChessboardSpec& board, std::vector<cv::Point2f>& corners);
+/// Finds any pattern kind (chessboard, circle grids, ChArUco — partial views allowed for
+/// ChArUco, at least 6 corners); false if not found.
+bool detectPattern(const cv::Mat& grey, const ChessboardSpec& board, PatternView& view);
 
 /// Zhang's calibration over images (files); throws std::runtime_error if fewer than 3 views
-/// show the board. `fix_aspect_ratio` forces fx = fy.
+/// show the board, std::invalid_argument if the images differ in size.
+IntrinsicsResult calibrateIntrinsics(const std::vector<std::string>& image_files, const ChessboardSpec& board,
+                                     const IntrinsicsOptions& options);
 IntrinsicsResult calibrateIntrinsics(const std::vector<std::string>& image_files, const ChessboardSpec& board,
                                      DistortionModel model, bool fix_aspect_ratio = false);
 /// The same over images in memory (grey, 8-bit), each with a name for the report; an empty image
 /// is reported as unreadable.
 IntrinsicsResult calibrateIntrinsics(const std::vector<std::pair<std::string, cv::Mat>>& views,
+                                     const ChessboardSpec& board, const IntrinsicsOptions& options);
+IntrinsicsResult calibrateIntrinsics(const std::vector<std::pair<std::string, cv::Mat>>& views,
                                      const ChessboardSpec& board, DistortionModel model,
                                      bool fix_aspect_ratio = false);
+/// Warnings for a calibration that looks suspect (high RMS, focal length far from the image
+/// size's usual range, fx ≠ fy, principal point far off centre, strong distortion with few views).
+std::vector<std::string> intrinsicsWarnings(const IntrinsicsResult& r, DistortionModel model);
 
 /// A frame taught by three points (thesis: robot with a calibrated pointer): origin, a point on
 /// +x, a point in the xy plane (y > 0 side). Throws std::invalid_argument if degenerate.
