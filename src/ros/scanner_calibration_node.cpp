@@ -136,6 +136,11 @@ class ScannerCalibration {
       res.message = "intrinsics from " + std::to_string(r.used.size()) + " of " + std::to_string(views.size()) +
                     " views, RMS " + std::to_string(r.rms_px) + " px" +
                     (res.file.empty() ? " (not written: ~calibration_dir is not set)" : ", written to " + res.file);
+      for (const auto& v : r.high_rms_views) res.message += "; high RMS: " + v;
+      for (const auto& w : r.warnings) {
+        res.message += "; warning: " + w;
+        ROS_WARN("scanner_calibration: intrinsics: %s", w.c_str());
+      }
     });
   }
 

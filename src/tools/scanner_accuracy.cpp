@@ -13,7 +13,7 @@
 //   cloud: MPE_P / sphere fit on any PLY/PCD cloud near a given centre (real data).
 // Output: JSON on stdout and, with --json FILE, written atomically.
 // Usage: cellsight_scanner_accuracy sim --scene S.yaml --trajectories T.yaml [--trajectory demo_sweep|none]
-//          [--no-noise] [--estimator centroid|gaussian3|run_centre] [--centroid-floor F]
+//          [--no-noise] [--estimator ridge|centroid|gaussian3|run_centre] [--centroid-floor F]
 //          [--background-percentile P] [--smoothing-degree N] [--sphere-model sphere25] [--k 5]
 //          [--sphere-step-mm 0.5] [--no-filter] [--ply scan.ply] [--json out.json]
 //        cellsight_scanner_accuracy scan --scene S.yaml --cloud scan.ply [--k 5] [--sphere-model sphere25]
@@ -52,7 +52,7 @@ namespace {
 
 /// The options of one subcommand (each has its own instance).
 struct Options {
-  std::string scene, trajectories, trajectory = "demo_sweep", estimator = "centroid";
+  std::string scene, trajectories, trajectory = "demo_sweep", estimator = "ridge";
   std::string sphere_model = "sphere25", ply, json, cloud, a, b;
   std::string frames, calibration, flange_truth, scanner_config = "config/scanner.yaml";
   bool no_noise = false, no_filter = false;
@@ -453,7 +453,7 @@ int main(int argc, char** argv) {
   c_sim->add_flag("--no-noise", sim.no_noise, "render without the noise model");
   c_sim->add_option("--estimator", sim.estimator, "line-centre estimator")
       ->check(cellsight_tools::parsedBy([](const std::string& e) { LineExtractionConfig::parseEstimator(e); },
-                                        "{centroid,gaussian3,run_centre}"))
+                                        "{ridge,centroid,gaussian3,run_centre}"))
       ->capture_default_str();
   c_sim->add_option("--centroid-floor", sim.line.centroid_floor, "centroid weight floor, share of peak - background")
       ->check(cellsight_tools::fraction())

@@ -55,7 +55,7 @@ TEST(CalibrationServices, IntrinsicsFromImagesInTheRequest) {
   srv.request.camera_name = "test_camera";
   ASSERT_TRUE(client.call(srv));
   ASSERT_EQ(srv.response.status, cellsight::CalibrateIntrinsics::Response::OK) << srv.response.message;
-  EXPECT_NEAR(srv.response.rms_px, 0.393, 0.0393);
+  EXPECT_LT(srv.response.rms_px, 0.393 * 1.1);  // OpenCV's own result 0.393 px: unchanged or better
   EXPECT_EQ(srv.response.per_view_rms_px.size(), srv.response.views_used);
   EXPECT_GT(srv.response.camera_info.K[0], 100.0);
   EXPECT_EQ(srv.response.file, calibrationDir() + "/test_camera.yaml");
