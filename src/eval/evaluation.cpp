@@ -106,12 +106,22 @@ LineCentreErrors lineCentreErrors(const ScannerRenderer& renderer, const Eigen::
     const double grad = std::hypot(fx, fy);
     if (!(grad > 0)) continue;
     const double err = std::abs(f0 / grad);
+    int h1, h2, h3, h4;
+    f(p.u + 3, p.v, h1);
+    f(p.u - 3, p.v, h2);
+    f(p.u, p.v + 3, h3);
+    f(p.u, p.v - 3, h4);
+    if (h1 == g0 && h2 == g0 && h3 == g0 && h4 == g0) {
+      e.interior_rms_px += err * err;
+      ++e.interior_points;
+    }
     s2 += err * err;
     s1 += err;
     e.max_px = std::max(e.max_px, err);
     errs.push_back(err);
     ++e.points;
   }
+  if (e.interior_points) e.interior_rms_px = std::sqrt(e.interior_rms_px / static_cast<double>(e.interior_points));
   if (e.points) {
     e.rms_px = std::sqrt(s2 / static_cast<double>(e.points));
     e.mean_px = s1 / static_cast<double>(e.points);

@@ -6,12 +6,16 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <Eigen/Eigenvalues>
+#include <fstream>
 #include <functional>
+#include <nlohmann/json.hpp>
 
 #include "cellsight/common/yaml_reader.hpp"
 #include "cellsight/eval/sim_scan.hpp"
 #include "cellsight/eval/evaluation.hpp"
 #include "cellsight/scanner/calibrate.hpp"
+#include "cellsight/scanner/triangulation.hpp"
 #include "cellsight/sim/calibration_captures.hpp"
 #include "sim/sim_test_scenes.hpp"
 
@@ -274,4 +278,92 @@ TEST(SelfCalibration, BadCapturesAreRefusedWithTheirCause) {
   // too few views for the intrinsics
   EXPECT_NE(message([&] { calibrateIntrinsics({{"a", half}, {"b", table}}, board, DistortionModel::kFull); }).find("at least 3 views"),
             std::string::npos);
+}
+
+TEST(RealData, FabScanPiFramesTriangulateOntoTheTurntable) {
+  // The real scan end to end with the scanner's own shipped calibration (dummy.config.json):
+  // frames turned to the portrait orientation the calibration belongs to (the device's software
+  // transposes and mirrors: 90° clockwise), our line centres, our triangulation against its sheet
+  // n·X = d (camera frame, mm), then X_platform = Rᵀ(X − t) turned by the table angle about z.
+  // The turntable top is the plane z = 0 of that frame: the points on it measure the chain.
+  const std::string dir = kData + "/laser/fabscanpi";
+  REQUIRE_DATA(dir);
+  std::ifstream in(dir + "/dummy.config.json");
+  const nlohmann::json cfg = nlohmann::json::parse(in)["calibration"];
+  const auto& Km = cfg["camera_matrix"];
+  CameraIntrinsics cam{"fabscanpi", 1232, 1640, Km[0][0], Km[1][1], Km[0][2], Km[1][2], {0, 0, 0, 0, 0}};
+  for (size_t i = 0; i < 5; ++i) cam.dist[i] = cfg["distortion_vector"][i];
+  Plane sheet;
+  for (int k = 0; k < 3; ++k) sheet.n[k] = cfg["laser_planes"][0]["normal"][k];
+  sheet.d = -static_cast<double>(cfg["laser_planes"][0]["distance"]) * 1e-3;  // n·X = d mm → n·X + d' = 0 m
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  for (int r = 0; r < 3; ++r) {
+    t[r] = static_cast<double>(cfg["platform_translation"][r]) * 1e-3;
+    for (int c = 0; c < 3; ++c) R(r, c) = cfg["platform_rotation"][r][c];
+  }
+  const auto files = listImages({dir + "/scan_res1_laser1"});
+  ASSERT_EQ(files.size(), 101u);
+  std::vector<cv::Mat> frames;
+  for (const auto& f : files) {
+    cv::Mat img = cv::imread(f, cv::IMREAD_COLOR);
+    ASSERT_FALSE(img.empty()) << f;
+    cv::rotate(img, img, cv::ROTATE_90_CLOCKWISE);
+    cv::cvtColor(img, img, cv::COLOR_BGR2RGB);
+    frames.push_back(img);
+  }
+  struct Fit {
+    size_t points = 0, table = 0;
+    double rms_mm = 0, tilt_deg = 0, offset_mm = 0;
+  };
+  auto run = [&](LineExtractionConfig::Estimator estimator, bool distortion) {
+    CameraIntrinsics c = cam;
+    if (!distortion) c.dist = {0, 0, 0, 0, 0};  // as the device's own software computes
+    const UndistortionMap map(c);
+    LineExtractionConfig line;
+    line.channel = 0;
+    line.estimator = estimator;
+    line.line_along_rows = false;  // column methods: the portrait frames' line runs along the columns
+    std::vector<Eigen::Vector3d> table;
+    Fit fit;
+    for (size_t i = 0; i < frames.size(); ++i) {
+      const Eigen::Matrix3d Rz =
+          Eigen::AngleAxisd(static_cast<double>(i) * 3.6 * M_PI / 180, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+      for (const auto& p : triangulate(extractLine(frames[i], line), map, sheet)) {
+        const Eigen::Vector3d q = Rz * (R.transpose() * (p.p - t));
+        ++fit.points;
+        if (std::abs(q.z()) < 0.003 && std::hypot(q.x(), q.y()) < 0.070) table.push_back(q);
+      }
+    }
+    fit.table = table.size();
+    if (table.size() < 3) return fit;
+    Eigen::Vector3d m = Eigen::Vector3d::Zero();
+    for (const auto& q : table) m += q;
+    m /= static_cast<double>(table.size());
+    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+    for (const auto& q : table) C += (q - m) * (q - m).transpose();
+    const Eigen::Vector3d n = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(C).eigenvectors().col(0);
+    double s2 = 0;
+    for (const auto& q : table) s2 += std::pow(n.dot(q - m), 2);
+    fit.rms_mm = std::sqrt(s2 / static_cast<double>(table.size())) * 1e3;
+    fit.tilt_deg = std::acos(std::min(1.0, std::abs(n.z()))) * 180 / M_PI;
+    fit.offset_mm = m.z() * 1e3;
+    return fit;
+  };
+  const Fit ridge = run(LineExtractionConfig::Estimator::kRidge, true);
+  const Fit ridge_nodist = run(LineExtractionConfig::Estimator::kRidge, false);
+  const Fit cols = run(LineExtractionConfig::Estimator::kCentroid, true);
+  for (const auto& [name, f] : {std::pair<const char*, const Fit&>{"ridge, shipped distortion", ridge},
+                                {"ridge, no distortion (as the device)", ridge_nodist},
+                                {"column centroid, shipped distortion", cols}}) {
+    std::printf("fabscanpi end to end, %s: %zu points, %zu on the turntable (|z| < 3 mm, r < 70 mm): plane RMS %.3f mm, "
+                "tilt %.2f deg, height %.3f mm\n", name, f.points, f.table, f.rms_mm, f.tilt_deg, f.offset_mm);
+  }
+  // The turntable comes out flat, level and at z = 0 of the device's own platform frame.
+  EXPECT_GT(ridge.table, 30000u);
+  EXPECT_LT(ridge.rms_mm, 1.2);
+  EXPECT_LT(ridge.tilt_deg, 0.5);
+  EXPECT_LT(std::abs(ridge.offset_mm), 1.5);
+  EXPECT_GT(ridge.table, 3 * cols.table);  // the column method loses the table's steep traces
+  EXPECT_LT(ridge.rms_mm, cols.rms_mm);
 }

@@ -51,6 +51,10 @@ struct LineCentreErrors {
   double coverage = 0;  ///< share of the noise-free trace's row/column crossings with a centre
   double false_share = 0;  ///< share of centres away from the noise-free trace
   double rms_px = 0, max_px = 0, mean_px = 0, p95_px = 0;
+  /// The same over centres whose surface continues 3 px around them (no depth edge or surface
+  /// change near: the centre estimator on smooth, possibly curved traces).
+  size_t interior_points = 0;
+  double interior_rms_px = 0;
 };
 LineCentreErrors lineCentreErrors(const ScannerRenderer& renderer,
                                   const Eigen::Isometry3d& T_base_flange,
