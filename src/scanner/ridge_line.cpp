@@ -334,7 +334,11 @@ std::vector<LinePoint> extractRidge(const cv::Mat& img, const LineExtractionConf
     }
     if (!back.empty()) poly.insert(poly.begin(), back.rbegin(), back.rend());
     // Judge the polyline: long enough, and a line rather than a lit area.
-    const size_t e = static_cast<size_t>(std::max(0, c.segment_erode));
+    // The Gaussian derivatives reach past a polyline's end (a depth edge, the fan's end): the
+    // centres within σ of it are biased, so they go too.
+    const size_t e = c.segment_erode <= 0 ? 0
+                                          : static_cast<size_t>(c.segment_erode) +
+                                                static_cast<size_t>(std::ceil(c.ridge_sigma));
     std::vector<float> widths;
     widths.reserve(poly.size());
     for (const auto& q : poly) widths.push_back(q.width);

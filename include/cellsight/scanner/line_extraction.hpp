@@ -51,8 +51,9 @@ struct LineExtractionConfig {
   /// Edge (veil) points: the polyline is cut into segments where neighbouring columns are
   /// missing or the centre jumps by more than `segment_max_jump` px (column methods; the ridge
   /// detector cuts where linking finds no continuation); `segment_erode` points are dropped at
-  /// each segment end (mixed pixels at depth edges and at the ends of the fan) and segments
-  /// shorter than `min_segment` points are dropped. segment_erode = 0 disables.
+  /// each segment end (mixed pixels at depth edges and at the ends of the fan; the ridge drops
+  /// ⌈ridge_sigma⌉ more, where its Gaussian reaches past the end) and segments shorter than
+  /// `min_segment` points are dropped. segment_erode = 0 disables.
   double segment_max_jump = 1.0;
   int segment_erode = 2;
   int min_segment = 5;
