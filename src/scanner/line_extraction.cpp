@@ -29,13 +29,13 @@ const char* LineExtractionConfig::estimatorName(Estimator e) {
 }
 
 double detail::backgroundLevel(const cv::Mat& img, double percentile) {
-  // Histogram of every 4th row: the line covers well under 2 % of the pixels.
+  // Histogram of every 2nd pixel of every 16th row: the line covers well under 2 % of the pixels.
   uint32_t hist[256] = {0};
   uint32_t n = 0;
-  for (int v = 0; v < img.rows; v += 8) {
+  for (int v = 0; v < img.rows; v += 16) {
     const uint8_t* r = img.ptr<uint8_t>(v);
-    for (int u = 0; u < img.cols; ++u) ++hist[r[u]];
-    n += static_cast<uint32_t>(img.cols);
+    for (int u = 0; u < img.cols; u += 2) ++hist[r[u]];
+    n += static_cast<uint32_t>((img.cols + 1) / 2);
   }
   const double target = percentile * n;
   double acc = 0;

@@ -11,9 +11,9 @@
 //     depth edges) and smoothed across the line by a local polynomial in the polyline's frame.
 #include "ridge_line.hpp"
 
-#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 namespace cellsight::detail {
@@ -23,6 +23,8 @@ namespace {
 struct Kernels {
   int r = 0;
   std::vector<float> w0, w1, w2;  ///< correlation weights: smoothing, d/dx, d²/dx²
+  /// The same from the centre out (w0, w2 even, w1 odd): e*[k] = w*[r + k], k = 0 … r.
+  std::vector<float> e0, e1, e2;
 };
 
 Kernels makeKernels(double sigma) {
@@ -57,6 +59,11 @@ Kernels makeKernels(double sigma) {
     k.w0.push_back(static_cast<float>(g[static_cast<size_t>(i)]));
     k.w1.push_back(static_cast<float>(d1[static_cast<size_t>(i)]));
     k.w2.push_back(static_cast<float>(d2[static_cast<size_t>(i)]));
+  }
+  for (int i = 0; i <= k.r; ++i) {
+    k.e0.push_back(k.w0[static_cast<size_t>(k.r + i)]);
+    k.e1.push_back(k.w1[static_cast<size_t>(k.r + i)]);
+    k.e2.push_back(k.w2[static_cast<size_t>(k.r + i)]);
   }
   return k;
 }
@@ -107,6 +114,7 @@ class PixelIndex {
 /// offsets of its neighbours (±h points) in the point's own (tangent, normal) frame.
 void smoothPolyline(std::vector<RidgePoint>& poly, int degree, int h) {
   if (degree <= 0 || poly.size() < 3) return;
+  degree = std::min(degree, 2);
   const std::vector<RidgePoint> src = poly;
   const long n = static_cast<long>(src.size());
   for (long i = 0; i < n; ++i) {
@@ -115,21 +123,36 @@ void smoothPolyline(std::vector<RidgePoint>& poly, int degree, int h) {
     if (deg < 0) continue;
     const RidgePoint& pi = src[static_cast<size_t>(i)];
     const double tx = -pi.ny, ty = pi.nx;
-    Eigen::Matrix4d AtA = Eigen::Matrix4d::Zero();
-    Eigen::Vector4d Atb = Eigen::Vector4d::Zero();
+    // Moments of a (along, scaled) and b (across): the normal equations of b = c0 + c1·a + c2·a².
+    double S[5] = {0, 0, 0, 0, 0}, T[3] = {0, 0, 0};
     const double scale = h + 1.0;
     for (long k = lo; k <= hi; ++k) {
       const RidgePoint& pk = src[static_cast<size_t>(k)];
       const double du = pk.u - pi.u, dv = pk.v - pi.v;
       const double a = (du * tx + dv * ty) / scale, b = du * pi.nx + dv * pi.ny;
-      Eigen::Vector4d phi(1, a, a * a, a * a * a);
-      for (int d = deg + 1; d < 4; ++d) phi[d] = 0;
-      AtA += phi * phi.transpose();
-      Atb += phi * b;
+      const double a2 = a * a;
+      S[0] += 1;
+      S[1] += a;
+      S[2] += a2;
+      S[3] += a2 * a;
+      S[4] += a2 * a2;
+      T[0] += b;
+      T[1] += b * a;
+      T[2] += b * a2;
     }
-    for (int d = deg + 1; d < 4; ++d) AtA(d, d) = 1;
-    const double c0 = AtA.ldlt().solve(Atb)(0);
-    if (!std::isfinite(c0)) continue;
+    double c0 = std::numeric_limits<double>::quiet_NaN();
+    if (deg >= 2) {  // Cramer's rule for c0 of the 3 × 3 system
+      auto det3 = [](double a, double b, double c, double d, double e, double f, double g, double hh, double k) {
+        return a * (e * k - f * hh) - b * (d * k - f * g) + c * (d * hh - e * g);
+      };
+      const double D = det3(S[0], S[1], S[2], S[1], S[2], S[3], S[2], S[3], S[4]);
+      if (std::abs(D) > 1e-12) c0 = det3(T[0], S[1], S[2], T[1], S[2], S[3], T[2], S[3], S[4]) / D;
+    }
+    if (!std::isfinite(c0) && deg >= 1) {
+      const double D = S[0] * S[2] - S[1] * S[1];
+      if (std::abs(D) > 1e-12) c0 = (T[0] * S[2] - S[1] * T[1]) / D;
+    }
+    if (!std::isfinite(c0)) c0 = T[0] / S[0];
     poly[static_cast<size_t>(i)].u = static_cast<float>(pi.u + c0 * pi.nx);
     poly[static_cast<size_t>(i)].v = static_cast<float>(pi.v + c0 * pi.ny);
   }
@@ -167,29 +190,36 @@ std::vector<LinePoint> extractRidge(const cv::Mat& img, const LineExtractionConf
                            (p >= up[x - 1] && p >= dn[x + 1]) || (p >= up[x + 1] && p >= dn[x - 1]);
         if (!crest) continue;
         ++st.scanned;
-        // Separable Gaussian derivatives at (x, y): rows first, then down the column.
+        // Separable Gaussian derivatives at (x, y): rows first, then down the column; the
+        // kernels' symmetry halves the products (sums and differences of mirrored pixels).
+        const float* e0 = K.e0.data();
+        const float* e1 = K.e1.data();
+        const float* e2 = K.e2.data();
         for (int j = 0; j < n; ++j) {
-          const uint8_t* q = img.ptr<uint8_t>(y - r + j) + x - r;
-          float a0 = 0, a1 = 0, a2 = 0;
-          for (int k = 0; k < n; ++k) {
-            const float v = q[k];
-            a0 += K.w0[static_cast<size_t>(k)] * v;
-            a1 += K.w1[static_cast<size_t>(k)] * v;
-            a2 += K.w2[static_cast<size_t>(k)] * v;
+          const uint8_t* q = img.ptr<uint8_t>(y - r + j) + x;
+          const float c0 = q[0];
+          float a0 = e0[0] * c0, a1 = 0, a2 = e2[0] * c0;
+          for (int k = 1; k <= r; ++k) {
+            const float sum = static_cast<float>(q[k] + q[-k]), dif = static_cast<float>(q[k] - q[-k]);
+            a0 += e0[k] * sum;
+            a1 += e1[k] * dif;
+            a2 += e2[k] * sum;
           }
           h0[static_cast<size_t>(j)] = a0;
           h1[static_cast<size_t>(j)] = a1;
           h2[static_cast<size_t>(j)] = a2;
         }
-        float g = 0, gx = 0, gy = 0, gxx = 0, gyy = 0, gxy = 0;
-        for (int j = 0; j < n; ++j) {
-          const float w0 = K.w0[static_cast<size_t>(j)], w1 = K.w1[static_cast<size_t>(j)], w2 = K.w2[static_cast<size_t>(j)];
-          g += w0 * h0[static_cast<size_t>(j)];
-          gx += w0 * h1[static_cast<size_t>(j)];
-          gxx += w0 * h2[static_cast<size_t>(j)];
-          gy += w1 * h0[static_cast<size_t>(j)];
-          gxy += w1 * h1[static_cast<size_t>(j)];
-          gyy += w2 * h0[static_cast<size_t>(j)];
+        const float* H0 = h0.data() + r;
+        const float* H1 = h1.data() + r;
+        const float* H2 = h2.data() + r;
+        float g = e0[0] * H0[0], gx = e0[0] * H1[0], gxx = e0[0] * H2[0], gy = 0, gxy = 0, gyy = e2[0] * H0[0];
+        for (int k = 1; k <= r; ++k) {
+          g += e0[k] * (H0[k] + H0[-k]);
+          gx += e0[k] * (H1[k] + H1[-k]);
+          gxx += e0[k] * (H2[k] + H2[-k]);
+          gy += e1[k] * (H0[k] - H0[-k]);
+          gxy += e1[k] * (H1[k] - H1[-k]);
+          gyy += e2[k] * (H0[k] + H0[-k]);
         }
         const float G = g - bg;
         const float mean = 0.5f * (gxx + gyy), dev = std::sqrt(0.25f * (gxx - gyy) * (gxx - gyy) + gxy * gxy);

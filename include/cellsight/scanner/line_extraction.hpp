@@ -57,7 +57,8 @@ struct LineExtractionConfig {
   double segment_max_jump = 1.0;
   int segment_erode = 2;
   int min_segment = 5;
-  /// Local polynomial (Savitzky–Golay) smoothing of the centre polyline: degree 0 disables.
+  /// Local polynomial (Savitzky–Golay) smoothing of the centre polyline: degree 0 disables
+  /// (the ridge fits at most a quadratic across the line; 3 acts as 2 there).
   int smoothing_degree = 2;
   int smoothing_half_window = 7;       ///< columns on each side
   double smoothing_max_jump = 1.5;     ///< px; a larger step between neighbours breaks a segment
