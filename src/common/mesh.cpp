@@ -113,11 +113,20 @@ TriangleMesh loadMesh(const std::string& path, double scale) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw ConfigError(path + ": cannot open mesh file (missing or unreadable)");
   std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const std::string ext = lower(path.size() > 4 ? path.substr(path.size() - 4) : path);
+  const size_t dot = path.find_last_of("./");
+  const std::string ext = dot != std::string::npos && path[dot] == '.' ? lower(path.substr(dot + 1)) : "";
   TriangleMesh mesh;
-  if (ext == ".ply" || data.rfind("ply", 0) == 0) {
+  if (ext == "ply" || data.rfind("ply", 0) == 0) {
     mesh = loadPly(path, data, scale);
   } else {
+    // Only formats whose importer the extension names: given an unknown extension assimp guesses
+    // the format from the content, and some of its importers trust counts in a file (a 45-byte
+    // input made its Quick3D reader ask for 3.6 TB).
+    static const char* const kFormats[] = {"stl", "obj", "off", "gltf", "glb", "3mf", "dae"};
+    if (std::find(std::begin(kFormats), std::end(kFormats), ext) == std::end(kFormats)) {
+      throw ConfigError(path + ": unsupported mesh format '" + ext +
+                        "' (use .ply, .stl, .obj, .off, .gltf, .glb, .3mf or .dae)");
+    }
     data.clear();
     mesh = loadMeshWithAssimp(path, scale);
   }
