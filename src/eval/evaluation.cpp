@@ -163,10 +163,14 @@ LineCoverage lineCoverage(const cv::Mat& mono, const std::vector<LinePoint>& cen
   // Centres by pixel row and column, for the "is there a centre in this run" test.
   const int W = mono.cols, H = mono.rows;
   std::vector<std::vector<float>> by_col(static_cast<size_t>(W)), by_row(static_cast<size_t>(H));
+  // A centre serves the crossings of its own and the neighbouring columns and rows (a line at a
+  // slant gets one centre per pixel it passes, not one per row and one per column).
   for (const auto& p : centres) {
     const long u = std::lround(p.u), v = std::lround(p.v);
-    if (u >= 0 && u < W) by_col[static_cast<size_t>(u)].push_back(p.v);
-    if (v >= 0 && v < H) by_row[static_cast<size_t>(v)].push_back(p.u);
+    for (long d = -1; d <= 1; ++d) {
+      if (u + d >= 0 && u + d < W) by_col[static_cast<size_t>(u + d)].push_back(p.v);
+      if (v + d >= 0 && v + d < H) by_row[static_cast<size_t>(v + d)].push_back(p.u);
+    }
   }
   const double tol = rule.tolerance_px;
   auto runs = [&](bool transpose, auto on_run) {

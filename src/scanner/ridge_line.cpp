@@ -312,7 +312,7 @@ std::vector<LinePoint> extractRidge(const cv::Mat& img, const LineExtractionConf
   std::vector<LinePoint> out;
   out.reserve(pts.size());
   std::vector<RidgePoint> poly, back;
-  int segment = 0;
+  std::vector<std::vector<RidgePoint>> polylines;
   for (size_t seed : order) {
     if (used[seed]) continue;
     used[seed] = 1;
@@ -363,9 +363,39 @@ std::vector<LinePoint> extractRidge(const cv::Mat& img, const LineExtractionConf
       }
     }
     if (!back.empty()) poly.insert(poly.begin(), back.rbegin(), back.rend());
+    polylines.push_back(poly);
+  }
+  // Which polyline each centre ended up in, for the end test below.
+  std::vector<int> owner(pts.size(), -1);
+  {
+    size_t k = 0;
+    for (const auto& pl : polylines) {
+      for (const auto& q : pl) {
+        // pts is sorted by pixel and has one point per pixel: find it.
+        index.forBox(q.x, q.x, q.y, q.y, [&](size_t i) { owner[i] = static_cast<int>(k); });
+      }
+      ++k;
+    }
+  }
+  // An end that meets another polyline within a few pixels is a corner or a junction of one
+  // surface's trace, not a depth edge: it keeps its centres.
+  const int J = static_cast<int>(std::ceil(c.link_max_gap + 1.0));
+  auto joined = [&](const RidgePoint& end, size_t self) {
+    bool found = false;
+    index.forBox(end.x - J, end.x + J, end.y - J, end.y + J, [&](size_t i) {
+      if (owner[i] >= 0 && static_cast<size_t>(owner[i]) != self &&
+          polylines[static_cast<size_t>(owner[i])].size() >= static_cast<size_t>(std::max(1, c.min_segment)) &&
+          std::hypot(pts[i].u - end.u, pts[i].v - end.v) <= static_cast<float>(J))
+        found = true;
+    });
+    return found;
+  };
+  int segment = 0;
+  for (size_t k = 0; k < polylines.size(); ++k) {
+    std::vector<RidgePoint>& poly = polylines[k];
     // Judge the polyline: long enough, and a line rather than a lit area.
-    // The Gaussian derivatives reach past a polyline's end (a depth edge, the fan's end): the
-    // centres within σ of it are biased, so they go too.
+    // The Gaussian derivatives reach past a polyline's free end (a depth edge, the fan's end):
+    // the centres within σ of it are biased, so they go too.
     const size_t e = c.segment_erode <= 0 ? 0
                                           : static_cast<size_t>(c.segment_erode) +
                                                 static_cast<size_t>(std::ceil(c.ridge_sigma));
@@ -385,9 +415,10 @@ std::vector<LinePoint> extractRidge(const cv::Mat& img, const LineExtractionConf
       else st.edge += static_cast<int>(poly.size());
       continue;
     }
-    st.edge += static_cast<int>(2 * e);
-    poly.erase(poly.end() - static_cast<long>(e), poly.end());
-    poly.erase(poly.begin(), poly.begin() + static_cast<long>(e));
+    const size_t e_front = joined(poly.front(), k) ? 0 : e, e_back = joined(poly.back(), k) ? 0 : e;
+    st.edge += static_cast<int>(e_front + e_back);
+    poly.erase(poly.end() - static_cast<long>(e_back), poly.end());
+    poly.erase(poly.begin(), poly.begin() + static_cast<long>(e_front));
     smoothPolyline(poly, std::min(c.smoothing_degree, 3), c.smoothing_half_window);
     for (const RidgePoint& q : poly) {
       LinePoint lp;
