@@ -54,7 +54,8 @@ namespace {
 struct Options {
   std::string scene, trajectories, trajectory = "demo_sweep", estimator = "ridge";
   std::string sphere_model = "sphere25", ply, json, cloud, a, b;
-  std::string frames, calibration, flange_truth, scanner_config = "config/scanner.yaml";
+  std::string frames, calibration, flange_truth, scanner_config = "config/scanner.yaml", line_settings;
+  bool estimator_given = false;
   bool no_noise = false, no_filter = false;
   LineExtractionConfig line;  // --centroid-floor, --background-percentile, --smoothing-degree
   int k = 5;
@@ -90,7 +91,8 @@ int runSim(const Options& o) {
   Scene scene = loadScene(o.scene);
   if (o.no_noise) scene.noise.enabled = false;
   LineExtractionConfig line = o.line;
-  line.estimator = LineExtractionConfig::parseEstimator(o.estimator);
+  if (!o.line_settings.empty()) line = loadScannerSettings(o.line_settings).line;  // as the node reads them
+  if (o.line_settings.empty() || o.estimator_given) line.estimator = LineExtractionConfig::parseEstimator(o.estimator);
   TriangulationConfig tri;
   auto geometry = std::make_shared<CellGeometry>(scene);
   ScannerRenderer renderer(geometry);
@@ -451,7 +453,10 @@ int main(int argc, char** argv) {
   c_sim->add_option("--trajectory", sim.trajectory, "trajectory of the whole-scene scan; none: skip that scan")
       ->capture_default_str();
   c_sim->add_flag("--no-noise", sim.no_noise, "render without the noise model");
-  c_sim->add_option("--estimator", sim.estimator, "line-centre estimator")
+  c_sim->add_option("--settings", sim.line_settings,
+                    "scanner settings YAML whose line: section to use, as the triangulation node (e.g. config/scanner.yaml)")
+      ->check(CLI::ExistingFile);
+  c_sim->add_option("--estimator", sim.estimator, "line-centre estimator (overrides the settings')")
       ->check(cellsight_tools::parsedBy([](const std::string& e) { LineExtractionConfig::parseEstimator(e); },
                                         "{ridge,centroid,gaussian3,run_centre}"))
       ->capture_default_str();
@@ -532,6 +537,7 @@ int main(int argc, char** argv) {
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
   scan.k_given = scan_k->count() > 0;
   return cellsight_tools::runTool([&] {
+    sim.estimator_given = c_sim->count("--estimator") > 0;
     if (c_sim->parsed()) return runSim(sim);
     if (c_scan->parsed()) return runScan(scan);
     if (c_frm->parsed()) return runFrames(frm);

@@ -6,7 +6,6 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include <Eigen/Eigenvalues>
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -14,6 +13,7 @@
 #include "cellsight/common/yaml_reader.hpp"
 #include "cellsight/eval/sim_scan.hpp"
 #include "cellsight/eval/evaluation.hpp"
+#include "cellsight/scanner/accuracy.hpp"
 #include "cellsight/scanner/calibrate.hpp"
 #include "cellsight/scanner/triangulation.hpp"
 #include "cellsight/sim/calibration_captures.hpp"
@@ -337,17 +337,12 @@ TEST(RealData, FabScanPiFramesTriangulateOntoTheTurntable) {
     }
     fit.table = table.size();
     if (table.size() < 3) return fit;
+    const PlaneFit plane = fitPlane(table);  // the scanner's own flatness fit
+    fit.rms_mm = plane.rms * 1e3;
+    fit.tilt_deg = std::acos(std::min(1.0, std::abs(plane.normal.z()))) * 180 / M_PI;
     Eigen::Vector3d m = Eigen::Vector3d::Zero();
     for (const auto& q : table) m += q;
-    m /= static_cast<double>(table.size());
-    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
-    for (const auto& q : table) C += (q - m) * (q - m).transpose();
-    const Eigen::Vector3d n = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(C).eigenvectors().col(0);
-    double s2 = 0;
-    for (const auto& q : table) s2 += std::pow(n.dot(q - m), 2);
-    fit.rms_mm = std::sqrt(s2 / static_cast<double>(table.size())) * 1e3;
-    fit.tilt_deg = std::acos(std::min(1.0, std::abs(n.z()))) * 180 / M_PI;
-    fit.offset_mm = m.z() * 1e3;
+    fit.offset_mm = m.z() / static_cast<double>(table.size()) * 1e3;
     return fit;
   };
   const Fit ridge = run(LineExtractionConfig::Estimator::kRidge, true);
