@@ -146,6 +146,14 @@ LineCoverage lineCoverage(const cv::Mat& mono, const std::vector<LinePoint>& cen
   cv::Mat sm;
   if (rule.smooth_sigma > 0) cv::GaussianBlur(mono, sm, cv::Size(), rule.smooth_sigma);
   else sm = mono;
+  cv::Mat glow;  // lit areas wider than a line (the opening keeps them, drops lines), widened
+  if (rule.skip_lit_areas) {
+    const int k = 2 * rule.max_width + 1;
+    cv::Mat base;
+    cv::morphologyEx(sm, base, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(k, k)));
+    cv::compare(base, (rule.background >= 0 ? rule.background : 0) + 0.5 * rule.min_contrast, glow, cv::CMP_GE);
+    cv::dilate(glow, glow, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(k, k)));
+  }
   double bg = rule.background;
   if (bg < 0) {
     // Local background: a white top-hat keeps what is narrower than the element (a line) and
@@ -207,9 +215,15 @@ LineCoverage lineCoverage(const cv::Mat& mono, const std::vector<LinePoint>& cen
     const auto& on = t ? by_row : by_col;
     runs(t, [&](int i, int j, int k) {
       const int mid = (j + k) / 2;
+      if (!glow.empty() && (t ? glow.at<uint8_t>(i, mid) : glow.at<uint8_t>(mid, i))) return;
       // A crossing runs across the line: not longer than the run the other way through its
-      // middle (a run along a thin line, split by speckle, is not a crossing).
+      // middle, and the line goes on through that middle both ways (a run along a thin line,
+      // split by speckle, or a fringe along its edge, is not a crossing).
       if (k - j + 1 > across(t, i, mid)) return;
+      if (i == 0 || i + 1 >= (t ? H : W)) return;
+      const uint8_t before = t ? sm.at<uint8_t>(i - 1, mid) : sm.at<uint8_t>(mid, i - 1);
+      const uint8_t after = t ? sm.at<uint8_t>(i + 1, mid) : sm.at<uint8_t>(mid, i + 1);
+      if (before < T || after < T) return;
       ++out.crossings;
       const auto& cs = on[static_cast<size_t>(i)];
       const bool hit = std::any_of(cs.begin(), cs.end(), [&](float c) { return c >= j - tol && c <= k + tol; });

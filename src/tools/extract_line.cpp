@@ -61,6 +61,7 @@ int main(int argc, char** argv) {
   int overlay_index = -1;
   double reference_contrast = 0;
   int rule_width = LineCoverageRule{}.max_width;
+  bool skip_glow = false;
   CLI::App app("Line extraction on recorded frames: centres per frame (CSV/JSON), overlays, and the share of the "
                "visible line that got a centre.",
                "cellsight_extract_line");
@@ -92,6 +93,8 @@ int main(int argc, char** argv) {
   app.add_option("--reference-width", rule_width, "widest run (px) the reference rule takes for a line crossing")
       ->check(cellsight_tools::positiveInt())
       ->capture_default_str();
+  app.add_flag("--reference-skip-glow", skip_glow,
+               "count no reference crossing in or near lit areas wider than a line (glow, specular spots)");
   app.add_option("--json", json, "write the figures to this JSON file");
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
   return cellsight_tools::runTool([&] {
@@ -111,6 +114,7 @@ int main(int argc, char** argv) {
     LineCoverageRule rule;
     rule.min_contrast = reference_contrast;
     rule.max_width = rule_width;
+    rule.skip_lit_areas = skip_glow;
     nlohmann::json per_frame = nlohmann::json::array();
     nlohmann::json centres_json = nlohmann::json::array();
     std::ostringstream csv;
@@ -190,6 +194,7 @@ int main(int argc, char** argv) {
       const double cov = crossings ? double(covered) / double(crossings) : 0.0;
       const double fls = found ? double(false_centres) / double(found) : 0.0;
       out["reference"] = {{"min_contrast", rule.min_contrast}, {"max_width", rule.max_width},
+                          {"skip_lit_areas", rule.skip_lit_areas},
                           {"tolerance_px", rule.tolerance_px}, {"crossings", crossings}, {"coverage", cov},
                           {"false_share", fls}};
       std::printf("visible line (contrast >= %.0f): %ld row/column crossings, %.1f %% with a centre; %.2f %% of the "

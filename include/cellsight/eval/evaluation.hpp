@@ -74,6 +74,10 @@ struct LineCoverageRule {
   double smooth_sigma = 1.0;   ///< px; 0: none
   double background = -1;     ///< ≥ 0: a fixed background level instead of the top-hat
   double tolerance_px = 2.0;   ///< a centre covers a crossing within the run ± this
+  /// Count no crossing in or near lit areas wider than a line (a glow, a specular spot: what the
+  /// opening by the 2·max_width + 1 element keeps at half the contrast, widened by as much),
+  /// where the rule's runs follow the glow's texture rather than a line.
+  bool skip_lit_areas = false;
 };
 struct LineCoverage {
   long crossings = 0;      ///< column and row crossings of a visible line
