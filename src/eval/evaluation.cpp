@@ -143,9 +143,15 @@ LineCentreErrors lineCentreErrors(const ScannerRenderer& renderer, const Eigen::
 
 LineCoverage lineCoverage(const cv::Mat& mono, const std::vector<LinePoint>& centres, const LineCoverageRule& rule) {
   if (mono.empty() || mono.type() != CV_8UC1) throw std::invalid_argument("lineCoverage: needs a CV_8UC1 image");
+  if (rule.max_width < 1 || rule.max_width > std::min(mono.cols, mono.rows)) {
+    throw std::invalid_argument("lineCoverage: max_width must lie in [1, the image's smaller side]");
+  }
+  if (!(rule.tolerance_px >= 0 && rule.tolerance_px <= 100)) {
+    throw std::invalid_argument("lineCoverage: tolerance_px must lie in [0, 100]");
+  }
   cv::Mat sm;
   if (rule.smooth_sigma > 0) cv::GaussianBlur(mono, sm, cv::Size(), rule.smooth_sigma);
-  else sm = mono;
+  else sm = mono.clone();  // the top-hat below works in place
   cv::Mat glow;  // lit areas wider than a line (the opening keeps them, drops lines), widened
   if (rule.skip_lit_areas) {
     const int k = 2 * rule.max_width + 1;
@@ -174,6 +180,7 @@ LineCoverage lineCoverage(const cv::Mat& mono, const std::vector<LinePoint>& cen
   // A centre serves the crossings of its own and the neighbouring columns and rows (a line at a
   // slant gets one centre per pixel it passes, not one per row and one per column).
   for (const auto& p : centres) {
+    if (!std::isfinite(p.u) || !std::isfinite(p.v)) continue;
     const long u = std::lround(p.u), v = std::lround(p.v);
     for (long d = -1; d <= 1; ++d) {
       if (u + d >= 0 && u + d < W) by_col[static_cast<size_t>(u + d)].push_back(p.v);
@@ -239,6 +246,10 @@ LineCoverage lineCoverage(const cv::Mat& mono, const std::vector<LinePoint>& cen
   cv::dilate(out.mask | lit, near, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * r + 1, 2 * r + 1)));
   for (const auto& p : centres) {
     ++out.centres;
+    if (!std::isfinite(p.u) || !std::isfinite(p.v)) {
+      ++out.false_centres;
+      continue;
+    }
     const long u = std::lround(p.u), v = std::lround(p.v);
     if (u < 0 || v < 0 || u >= W || v >= H || !near.at<uint8_t>(static_cast<int>(v), static_cast<int>(u))) ++out.false_centres;
   }

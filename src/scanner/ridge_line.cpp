@@ -70,9 +70,10 @@ Kernels makeKernels(double sigma) {
 
 /// Bilinear grey level, clamped to the image.
 float sample(const cv::Mat& img, float u, float v) {
-  u = std::clamp(u, 0.f, static_cast<float>(img.cols - 1) - 1e-3f);
-  v = std::clamp(v, 0.f, static_cast<float>(img.rows - 1) - 1e-3f);
-  const int x = static_cast<int>(u), y = static_cast<int>(v);
+  if (!std::isfinite(u) || !std::isfinite(v)) return 0.f;
+  u = std::clamp(u, 0.f, static_cast<float>(img.cols - 1));
+  v = std::clamp(v, 0.f, static_cast<float>(img.rows - 1));
+  const int x = std::min(static_cast<int>(u), img.cols - 2), y = std::min(static_cast<int>(v), img.rows - 2);
   const float a = u - static_cast<float>(x), b = v - static_cast<float>(y);
   const uint8_t* r0 = img.ptr<uint8_t>(y);
   const uint8_t* r1 = img.ptr<uint8_t>(y + 1);
@@ -165,7 +166,9 @@ std::vector<LinePoint> extractRidge(const cv::Mat& img, const LineExtractionConf
   const int r = K.r, n = 2 * r + 1, W = img.cols, H = img.rows;
   const float bg = static_cast<float>(st.background);
   // Hysteresis: candidates from half the contrast, a polyline needs one crest at full contrast.
-  const int T = static_cast<int>(std::ceil(bg + 0.5 * c.min_contrast));
+  const double T_level = std::ceil(bg + 0.5 * c.min_contrast);
+  if (!(T_level <= 255)) return {};  // no pixel can reach it (also a NaN or huge min_contrast)
+  const int T = static_cast<int>(T_level);
   const float min_strength = static_cast<float>(0.25 * c.min_contrast);
   const float low_contrast = static_cast<float>(0.5 * c.min_contrast);
   std::vector<RidgePoint> pts;
@@ -247,6 +250,10 @@ std::vector<LinePoint> extractRidge(const cv::Mat& img, const LineExtractionConf
         }
         const float gn = gx * nx + gy * ny;
         const float den = l1 * G - gn * gn;  // < 0 on a ridge
+        if (!(den < 0) || !(G > 0)) {
+          ++st.not_ridge;
+          continue;
+        }
         const float t = c.ridge_gaussian_profile ? -gn * G / den : -gn / l1;
         const float px = t * nx, py = t * ny;
         // Up to one pixel away: noise may make the neighbour of the centre's pixel the crest.
@@ -380,42 +387,55 @@ std::vector<LinePoint> extractRidge(const cv::Mat& img, const LineExtractionConf
   // An end that meets another polyline within a few pixels is a corner or a junction of one
   // surface's trace, not a depth edge: it keeps its centres.
   const int J = static_cast<int>(std::ceil(c.link_max_gap + 1.0));
+  // Judge every polyline first: long enough, bright enough, a line rather than a lit area.
+  std::vector<uint8_t> kept(polylines.size(), 0);
+  for (size_t k = 0; k < polylines.size(); ++k) {
+    const auto& poly = polylines[k];
+    std::vector<float> widths;
+    widths.reserve(poly.size());
+    float peak = 0;
+    for (const auto& q : poly) {
+      widths.push_back(q.width);
+      peak = std::max(peak, q.peak);
+    }
+    std::nth_element(widths.begin(), widths.begin() + static_cast<long>(widths.size() / 2), widths.end());
+    if (peak < static_cast<float>(c.min_contrast)) {
+      st.no_line += static_cast<int>(poly.size());
+    } else if (widths[widths.size() / 2] > static_cast<float>(c.max_run)) {
+      st.too_wide += static_cast<int>(poly.size());
+    } else if (poly.size() < static_cast<size_t>(std::max(1, c.min_segment))) {
+      st.edge += static_cast<int>(poly.size());
+    } else {
+      kept[k] = 1;
+    }
+  }
   auto joined = [&](const RidgePoint& end, size_t self) {
     bool found = false;
     index.forBox(end.x - J, end.x + J, end.y - J, end.y + J, [&](size_t i) {
-      if (owner[i] >= 0 && static_cast<size_t>(owner[i]) != self &&
-          polylines[static_cast<size_t>(owner[i])].size() >= static_cast<size_t>(std::max(1, c.min_segment)) &&
+      if (owner[i] >= 0 && static_cast<size_t>(owner[i]) != self && kept[static_cast<size_t>(owner[i])] &&
           std::hypot(pts[i].u - end.u, pts[i].v - end.v) <= static_cast<float>(J))
         found = true;
     });
     return found;
   };
+  // The Gaussian derivatives reach past a polyline's free end (a depth edge, the fan's end): the
+  // centres within σ of it are biased, so they go too.
+  const size_t e = c.segment_erode <= 0
+                       ? 0
+                       : static_cast<size_t>(c.segment_erode) + static_cast<size_t>(std::ceil(c.ridge_sigma));
+  std::vector<std::pair<size_t, size_t>> erosion(polylines.size(), {0, 0});  // decided before any is cut
+  for (size_t k = 0; k < polylines.size(); ++k) {
+    if (kept[k]) erosion[k] = {joined(polylines[k].front(), k) ? 0 : e, joined(polylines[k].back(), k) ? 0 : e};
+  }
   int segment = 0;
   for (size_t k = 0; k < polylines.size(); ++k) {
+    if (!kept[k]) continue;
     std::vector<RidgePoint>& poly = polylines[k];
-    // Judge the polyline: long enough, and a line rather than a lit area.
-    // The Gaussian derivatives reach past a polyline's free end (a depth edge, the fan's end):
-    // the centres within σ of it are biased, so they go too.
-    const size_t e = c.segment_erode <= 0 ? 0
-                                          : static_cast<size_t>(c.segment_erode) +
-                                                static_cast<size_t>(std::ceil(c.ridge_sigma));
-    std::vector<float> widths;
-    widths.reserve(poly.size());
-    for (const auto& q : poly) widths.push_back(q.width);
-    std::nth_element(widths.begin(), widths.begin() + static_cast<long>(widths.size() / 2), widths.end());
-    const bool too_wide = widths[widths.size() / 2] > static_cast<float>(c.max_run);
-    float peak = 0;
-    for (const auto& q : poly) peak = std::max(peak, q.peak);
-    if (peak < static_cast<float>(c.min_contrast)) {
-      st.no_line += static_cast<int>(poly.size());
+    const auto [e_front, e_back] = erosion[k];
+    if (poly.size() <= e_front + e_back) {
+      st.edge += static_cast<int>(poly.size());
       continue;
     }
-    if (too_wide || poly.size() < static_cast<size_t>(std::max(1, c.min_segment)) || poly.size() <= 2 * e) {
-      if (too_wide) st.too_wide += static_cast<int>(poly.size());
-      else st.edge += static_cast<int>(poly.size());
-      continue;
-    }
-    const size_t e_front = joined(poly.front(), k) ? 0 : e, e_back = joined(poly.back(), k) ? 0 : e;
     st.edge += static_cast<int>(e_front + e_back);
     poly.erase(poly.end() - static_cast<long>(e_back), poly.end());
     poly.erase(poly.begin(), poly.begin() + static_cast<long>(e_front));

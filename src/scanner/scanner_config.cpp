@@ -11,7 +11,7 @@ LineThresholds lineThresholdsOf(const LineExtractionConfig& c) {
 }
 
 std::pair<std::string, std::string> checkLineThresholds(const LineThresholds& t) {
-  if (!(t.min_contrast >= 0)) return {"min_contrast", "must be >= 0 (grey levels)"};
+  if (!(t.min_contrast >= 0 && t.min_contrast <= 255)) return {"min_contrast", "must be in [0, 255] (grey levels)"};
   if (!(t.threshold_fraction > 0 && t.threshold_fraction < 1)) return {"threshold_fraction", "must lie in (0, 1)"};
   if (t.max_run < 1) return {"max_run", "must be >= 1 (pixels)"};
   if (!(t.secondary_peak_ratio > 0 && t.secondary_peak_ratio <= 1)) return {"secondary_peak_ratio", "must lie in (0, 1]"};

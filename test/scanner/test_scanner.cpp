@@ -111,6 +111,26 @@ TEST(LineExtraction, RidgeRejectsSpeckleAndShortStreaks) {
   EXPECT_GT(st.not_ridge, 200);
 }
 
+TEST(LineExtraction, RidgeSurvivesDegenerateSettingsAndImages) {
+  // A flat frame at the background level with no contrast asked and Steger's step: derivatives
+  // of exactly zero (0/0 where the profile width is estimated) give no centre, no crash.
+  LineExtractionConfig c;
+  c.min_contrast = 0;
+  c.ridge_gaussian_profile = false;
+  EXPECT_TRUE(extractLine(cv::Mat(120, 160, CV_8UC1, cv::Scalar(50)), c).empty());
+  c.min_contrast = 1e10;  // no pixel can reach it
+  EXPECT_TRUE(extractLine(syntheticTrace(80, 80, 40, 40, 0, 0, 1.2, 180, 10), c).empty());
+  LineExtractionConfig wide;
+  wide.ridge_sigma = 10;  // a kernel wider than the image
+  EXPECT_TRUE(extractLine(syntheticTrace(40, 40, 20, 20, 30, 0, 1.2, 180, 10), wide).empty());
+  LineExtractionConfig loose;  // every setting at its permissive end
+  loose.min_segment = 1;
+  loose.segment_erode = 0;
+  loose.link_max_gap = 10;
+  loose.smoothing_degree = 3;
+  EXPECT_GT(extractLine(syntheticTrace(200, 200, 100, 100, 20, 0, 1.2, 180, 10), loose).size(), 150u);
+}
+
 TEST(LineExtraction, EveryEstimatorFindsTheKnownCentreNoiseFree) {
   const cv::Mat img = syntheticLine(400, 200, 80.3, 0.05, 1.2, 200, 10);
   for (auto est : {LineExtractionConfig::Estimator::kRidge, LineExtractionConfig::Estimator::kRunCentre,

@@ -85,6 +85,8 @@ struct LineExtractionStats {
   int saturated = 0;    ///< found, with the peak at 255
   int segments = 0;     ///< polylines kept
   int not_ridge = 0;    ///< ridge: candidates that are no line centre (blob, off-centre, dark)
+  // (ridge: centres merged into another of the same pixel or cross-section are not counted, so
+  // the counters do not add up to `scanned`)
   double background = 0;
 };
 
