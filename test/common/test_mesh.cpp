@@ -170,7 +170,7 @@ TEST(Mesh, OtherFormatsThroughAssimp) {
   EXPECT_NE(e.find("bad.off"), std::string::npos) << e;
   // an unknown extension is refused, not guessed from the content (fuzz_mesh: a Quick3D header
   // behind ".bin" made assimp ask for 3.6 TB)
-  cellsight_test::writeText(dir + "/part.bin", "quick3dssciat z\ne\xc8asciifindexcz3\nifindexcz3\n");
+  cellsight_test::writeText(dir + "/part.bin", "quick3dssciat z\ne\xc8" "asciifindexcz3\nifindexcz3\n");
   const std::string u = cellsight_test::errorOf([&] { loadMesh(dir + "/part.bin"); });
   EXPECT_NE(u.find("unsupported mesh format 'bin'"), std::string::npos) << u;
   cellsight_test::writeText(dir + "/noext", "solid x\nendsolid x\n");
