@@ -121,6 +121,12 @@ cv::Ptr<cv::aruco::Dictionary> arucoDictionary(const std::string& name) {
   return cv::aruco::getPredefinedDictionary(it->second);
 }
 
+}  // namespace
+
+void checkArucoDictionary(const std::string& name) { arucoDictionary(name); }
+
+namespace {
+
 std::vector<cv::Point3f> boardPoints(const ChessboardSpec& b) {
   std::vector<cv::Point3f> pts;
   const float s = static_cast<float>(b.square_size);

@@ -228,15 +228,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   in->add_option("--marker", o.marker, "charuco: marker side [m]")->check(positive());
   in->add_option("--dictionary", o.dictionary, "charuco: ArUco dictionary (4x4_50, 5x5_100, 6x6_250, original, ...)")
-      ->check(cellsight_tools::parsedBy([](const std::string& d) {
-        ChessboardSpec b;
-        b.kind = ChessboardSpec::Kind::kCharuco;
-        b.dictionary = d;
-        b.square_size = 1;
-        b.marker_size = 0.5;
-        PatternView v;
-        detectPattern(cv::Mat(8, 8, CV_8UC1, cv::Scalar(0)), b, v);  // throws for an unknown name
-      }, "DICTIONARY"))
+      ->check(cellsight_tools::parsedBy([](const std::string& d) { checkArucoDictionary(d); }, "DICTIONARY"))
       ->capture_default_str();
   in->add_option("--refine", o.refine,
                  "chessboard corners: adaptive (cornerSubPix window from the square size in px), fixed (winSize 11x11, "

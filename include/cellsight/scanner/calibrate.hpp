@@ -38,6 +38,9 @@ struct ChessboardSpec {
   static Refinement parseRefinement(const std::string& name);  ///< adaptive|fixed|sb
 };
 
+/// Throws std::invalid_argument naming the choices if `name` is no ArUco dictionary we know.
+void checkArucoDictionary(const std::string& name);
+
 /// One view's detected pattern: image points, their board coordinates (metres, z = 0) and ids
 /// (the index of each point on the full board; all of them unless the view is partial).
 struct PatternView {
