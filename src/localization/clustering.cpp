@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <unordered_set>
 
 #include "cellsight/common/yaml_reader.hpp"
 #include "cellsight/common/pcl_cloud.hpp"
@@ -85,10 +86,19 @@ ClusteringResult clusterScene(const ScanCloud& scene, const ClusteringConfig& cf
       }
       r.support.n = n;
       r.support.d = d;
-      // Keep what lies above the plane by more than the inlier band.
+      // Keep what lies above the plane by more than the inlier band; the band itself is the
+      // support seen, kept one point per 2 mm cell.
       auto above = pcl::make_shared<pcl::PointCloud<PointT>>();
+      std::unordered_set<uint64_t> cells;
       for (const auto& p : *cloud) {
-        if (r.support.distance(Eigen::Vector3d(p.x, p.y, p.z)) > cfg.plane_distance) above->push_back(p);
+        const double h = r.support.distance(Eigen::Vector3d(p.x, p.y, p.z));
+        if (h > cfg.plane_distance) {
+          above->push_back(p);
+        } else if (h >= -cfg.plane_distance && std::isfinite(p.x) && std::isfinite(p.y)) {
+          const auto ix = static_cast<int64_t>(std::floor(p.x / 0.002)), iy = static_cast<int64_t>(std::floor(p.y / 0.002));
+          if (cells.insert((static_cast<uint64_t>(ix) << 32) ^ static_cast<uint64_t>(iy & 0xffffffff)).second)
+            r.support_points.emplace_back(p.x, p.y, p.z);
+        }
       }
       cloud = above;
     } else {

@@ -41,6 +41,10 @@ class Clustering {
       out.header = msg->header;
       out.support_found = r.plane_found;
       if (r.plane_found) out.support_plane = {r.support.n.x(), r.support.n.y(), r.support.n.z(), r.support.d};
+      cellsight::ScanCloud seen;
+      for (const auto& p : r.support_points) seen.append(p, 0.f);
+      out.support_points = cellsight_ros::toCloudMsg(seen, msg->header.stamp);
+      out.support_points.header.frame_id = msg->header.frame_id;
       out.input_points = static_cast<uint32_t>(r.input_points);
       out.points_above_support = static_cast<uint32_t>(r.after_plane);
       out.warnings = r.warnings;

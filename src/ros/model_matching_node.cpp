@@ -182,7 +182,16 @@ class ModelMatching {
     const Eigen::Vector4f support(static_cast<float>(msg.support_plane[0]), static_cast<float>(msg.support_plane[1]),
                                   static_cast<float>(msg.support_plane[2]), static_cast<float>(msg.support_plane[3]));
     const bool use_support = msg.support_found && support.allFinite() && std::abs(support.head<3>().norm() - 1.f) < 1e-3f;
-    const auto dets = matcher_->locate(clusters, models, &stats, &eye, use_support ? &support : nullptr);
+    std::vector<Eigen::Vector3f> seen;
+    if (use_support && msg.support_points.width * msg.support_points.height > 0) {
+      try {
+        seen = cellsight_ros::fromCloudMsg(msg.support_points).points;
+      } catch (const std::exception& e) {
+        out->warnings.push_back(std::string("support_points unreadable, no free-space test: ") + e.what());
+      }
+    }
+    const auto dets = matcher_->locate(clusters, models, &stats, &eye, use_support ? &support : nullptr,
+                                       seen.empty() ? nullptr : &seen);
     out->header = msg.header;
     out->clusters = static_cast<uint32_t>(clusters.size());
     out->locate_seconds = stats.seconds;

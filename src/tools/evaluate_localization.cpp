@@ -72,6 +72,7 @@ struct Options {
   std::vector<double> ratios;
   std::string detections, cloud, calibration;
   double limit_rms_mm = 0, limit_t_mm = 0, limit_r_deg = 0, limit_recall = 0;  ///< cells: 0 = no limit
+  std::string dump_clusters;  ///< cells, cloud: write each scene's clusters as PLY here
   /// `value`, or `<root>/<relative>` when not given
   std::string orRoot(const std::string& value, const std::string& relative) const {
     return value.empty() ? root + "/" + relative : value;
@@ -353,7 +354,7 @@ int runOutliers(const Options& o) {
 struct ScoredDetection {
   std::string model;
   Eigen::Isometry3d pose;
-  double fitness = 0, coverage = 0, rmse = 0;
+  double fitness = 0, coverage = 0, rmse = 0, see_through = 0;
 };
 
 /// Detections against a scene's truth: each object takes the nearest unused detection of its
@@ -393,6 +394,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
       p["fitness"] = dets[bi].fitness;
       p["coverage"] = dets[bi].coverage;
       p["rmse_mm"] = dets[bi].rmse * 1e3;
+      p["see_through"] = dets[bi].see_through;
       terr->push_back(be.translation * 1e3);
       rerr->push_back(be.rotation / kDeg);
       ++counts->tp;
@@ -405,7 +407,30 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
     }
     out["parts"].push_back(p);
   }
-  for (bool u : used) counts->fp += !u;
+  // what each false detection is: a wrong pose of a part, a part taken for another, or a
+  // distractor taken for a part (the nearest object's centre to the detection's)
+  out["false_detections"] = json::array();
+  for (size_t i = 0; i < dets.size(); ++i) {
+    if (used[i]) continue;
+    ++counts->fp;
+    const Eigen::Vector3d at = dets[i].pose * centroids.centroid(dets[i].model);
+    json f = {{"model", dets[i].model},       {"fitness", dets[i].fitness}, {"coverage", dets[i].coverage},
+              {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through},
+              {"at", {at.x(), at.y(), at.z()}}};
+    double nearest = 1e9;
+    for (const auto& o : scene.objects) {
+      const Eigen::Vector3d c = lib.has(o.model) ? Eigen::Vector3d(o.T_base_object * centroids.centroid(o.model))
+                                                 : o.T_base_object.translation();
+      const double d = (c - at).norm();
+      if (d < nearest) {
+        nearest = d;
+        f["nearest_object"] = o.name;
+        f["nearest_is_distractor"] = !lib.has(o.model);
+        f["nearest_object_mm"] = d * 1e3;
+      }
+    }
+    out["false_detections"].push_back(f);
+  }
   out["tp"] = counts->tp;
   out["fp"] = counts->fp;
   out["fn"] = counts->fn;
@@ -453,14 +478,40 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   const ClusteringResult cr = clusterScene(cloud, ccfg);
   std::vector<ScanCloud> clusters;
   for (const auto& c : cr.clusters) clusters.push_back(c.cloud);
+  if (!o.dump_clusters.empty()) {  // what the matcher was given, for a look in a viewer
+    makeDirs(o.dump_clusters);
+    for (size_t i = 0; i < clusters.size(); ++i)
+      saveCloud(o.dump_clusters + "/" + scene.name + "_cluster_" + std::to_string(i) + ".ply", clusters[i]);
+  }
   const Eigen::Vector3f eye = scene.scanner_camera.T_base_camera.translation().cast<float>();
   const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
                                 static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
   MatchStats st;
-  const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr);
+  const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr, &cr.support_points);
   std::vector<ScoredDetection> dets;
-  for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse});
+  for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through});
   json sj = scoreDetections(scene, lib, matcher, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, counts, terr, rerr);
+  // a missed part: the pose of its model nearest the truth that validation refused, with the
+  // figures it failed on
+  for (auto& p : sj["parts"]) {
+    if (p["found"].get<bool>() || p.value("distractor", false)) continue;
+    for (const auto& o : scene.objects) {
+      if (o.name != p["name"].get<std::string>()) continue;
+      double nearest = 1e9;
+      for (const auto& r : st.rejected) {
+        if (r.model != o.model) continue;
+        const PoseError e = poseError(lib.model(o.model).info, matcher.centroid(o.model), r.pose, o.T_base_object);
+        if (e.translation >= nearest) continue;
+        nearest = e.translation;
+        p["nearest_rejected"] = {{"fitness", r.fitness},       {"coverage", r.coverage},
+                                 {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through},
+                                 {"cluster", r.cluster},       {"t_err_mm", e.translation * 1e3},
+                                 {"r_err_deg", e.rotation / kDeg}};
+      }
+    }
+  }
+  sj["cluster_sizes"] = json::array();
+  for (const auto& c : clusters) sj["cluster_sizes"].push_back(c.size());
   sj["points"] = cloud.size();
   sj["clusters"] = clusters.size();
   sj["locate_seconds"] = st.seconds;
@@ -669,6 +720,7 @@ int main(int argc, char** argv) {
   c_cells->add_option("--matching", cells.matching, "matching settings YAML [default: <root>/config/matching.yaml]")
       ->check(CLI::ExistingFile);
   c_cells->add_option("--seeds", cell_seeds, "scene seeds");
+  c_cells->add_option("--dump-clusters", cells.dump_clusters, "write every scene's clusters as PLY into this folder");
   c_cells->add_option("--seeds-file", seeds_file, "a seeds file, e.g. config/heldout_seeds.yaml")->check(CLI::ExistingFile);
   c_cells->add_option("--out", cells_out, "where the generated scenes go")->capture_default_str();
   c_cells->add_option("--json", cells.json, "write the figures to this JSON file");

@@ -52,6 +52,12 @@ TEST(Clustering, ThreeBoxesOnATable) {
     EXPECT_TRUE(b.contains(Eigen::Vector3f(centres[k][0], centres[k][1], centres[k][2]))) << k;
   }
   for (const auto& c : r.clusters) EXPECT_GT(c.box.min().z(), 0.0f);
+  // where the table was seen: on the plane, one per 2 mm cell, none under the boxes' tops
+  ASSERT_GT(r.support_points.size(), 1000u);
+  for (const auto& p : r.support_points) {
+    EXPECT_LE(std::abs(r.support.distance(p.cast<double>())), cfg.plane_distance + 1e-9);
+    EXPECT_FALSE(std::abs(p.x() - 0.55f) < 0.02f && std::abs(p.y() + 0.06f) < 0.02f) << p.transpose();
+  }
 }
 
 TEST(Clustering, BadCloudsGiveAClearEmptyResult) {

@@ -7,6 +7,7 @@
 #include <random>
 
 #include "cellsight/common/errors.hpp"
+#include "cellsight/common/raycaster.hpp"
 #include "cellsight/localization/localization_eval.hpp"
 #include "cellsight/localization/model_matching.hpp"
 #include "test_helpers.hpp"
@@ -154,6 +155,94 @@ TEST(ModelMatching, SupportPlaneDiscardsSunkenPoses) {
   EXPECT_LT(e.rotation, 0.5 * M_PI / 180);
   MatchStats st;
   EXPECT_TRUE(m.locate({view}, {"blade"}, &st, nullptr, &above).empty());
+}
+
+namespace {
+/// The table (z = 0) around a part as the camera at kEye sees it: 1 mm grid points within
+/// `half` of (x, y), those hidden by the part left out unless `through` (a camera that saw
+/// through the part: what the free-space test must refuse).
+std::vector<Eigen::Vector3f> seenTable(const TriangleMesh& mesh, const Eigen::Isometry3d& T, float half, bool through) {
+  RayCaster rc;
+  rc.addMesh(mesh, T);
+  rc.commit();
+  std::vector<Eigen::Vector3f> out;
+  const Eigen::Vector3f c = T.translation().cast<float>();
+  for (float x = c.x() - half; x <= c.x() + half; x += 0.001f) {
+    for (float y = c.y() - half; y <= c.y() + half; y += 0.001f) {
+      const Eigen::Vector3f p(x, y, 0.f);
+      const Eigen::Vector3f ray = p - kEye;
+      if (!through && rc.occluded(kEye, ray.normalized(), 0.f, ray.norm() - 1e-4f)) continue;
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+}  // namespace
+
+// A shaft standing on its end, flange up, as the simulated scanner saw it in generated cell
+// 3001: one flat disc (the rim is too steep or in the laser's shadow). Its point pairs share one
+// feature, which the PPF table leaves out; the part's flat faces are laid onto the disc instead,
+// and the flange-down reading of the disc, floating 55 mm above the table, is refused.
+TEST(ModelMatching, FlatViewIsLaidOnTheFacesAndFloatingPosesAreRefused) {
+  MatchingConfig c = config();
+  c.max_support_gap = 0.005;
+  ModelMatcher m(library(), c);
+  const ScanCloud view = loadCloud(std::string(CELLSIGHT_SOURCE_DIR) + "/test/localization/data/shaft_on_its_end.ply");
+  ASSERT_EQ(view.size(), 904u);
+  Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
+  truth.translation() = Eigen::Vector3d(0.4097116667616737, -0.04060711225567744, 0.0625);
+  truth.linear() = Eigen::Quaterniond(6.082787948976912e-17, -0.11474777071769761, 0.9933946592947431, 7.026274505936138e-18)
+                       .normalized()
+                       .toRotationMatrix();
+  const Eigen::Vector4f table(0, 0, 1, 0);
+  const auto d = m.locate({view}, {"flanged_shaft"}, nullptr, nullptr, &table);
+  ASSERT_EQ(d.size(), 1u);
+  const PoseError e = poseError(library()->model("flanged_shaft").info, m.centroid("flanged_shaft"), d[0].pose, truth);
+  EXPECT_LT(e.translation, 1e-3);
+  EXPECT_LT(e.rotation, 1 * M_PI / 180);
+}
+
+// The free-space test: with the table seen only where the part does not hide it, the part is
+// found and nothing is seen through it; a camera that saw the table through it refuses it.
+TEST(ModelMatching, APartTheCameraSawThroughIsRefused) {
+  MatchingConfig c = config();
+  c.max_see_through = 0.005;
+  ModelMatcher m(library(), c);
+  const Eigen::Isometry3d truth = onTable(0.5, -0.03, 0.6);
+  const TriangleMesh& mesh = library()->model("holder").mesh;
+  const ScanCloud view = singleViewCloud(mesh, truth, kEye, 0.001, 2e-5, 41);
+  const Eigen::Vector4f table(0, 0, 1, 0);
+  const auto seen = seenTable(mesh, truth, 0.06f, false);
+  const auto d = m.locate({view}, {"holder"}, nullptr, nullptr, &table, &seen);
+  ASSERT_EQ(d.size(), 1u);
+  EXPECT_LE(d[0].see_through, 0.005);
+  const PoseError e = poseError(library()->model("holder").info, m.centroid("holder"), d[0].pose, truth);
+  EXPECT_LT(e.translation, 0.5e-3);
+  const auto through = seenTable(mesh, truth, 0.06f, true);
+  MatchStats st;
+  EXPECT_TRUE(m.locate({view}, {"holder"}, &st, nullptr, &table, &through).empty());
+  ASSERT_FALSE(st.rejected.empty());
+  EXPECT_GT(st.rejected[0].see_through, 0.3);
+}
+
+// Two parts touching so closely that clustering keeps them together: neither explains 60 % of
+// the cluster, so it is searched again asking half; the first found leaves the other's points.
+TEST(ModelMatching, TwoTouchingPartsInOneClusterAreBothFound) {
+  ModelMatcher m(library(), config());
+  // side by side along y, 1 mm apart
+  const Eigen::AlignedBox3f ba = library()->model("housing").bounds, bb = library()->model("bracket").bounds;
+  const Eigen::Isometry3d a = onTable(0.47, 0.0, 0.0), b = onTable(0.47, ba.max().y() - bb.min().y() + 0.001, 0.0);
+  ScanCloud both = singleViewCloud(library()->model("housing").mesh, a, kEye, 0.001, 2e-5, 51);
+  const ScanCloud vb = singleViewCloud(library()->model("bracket").mesh, b, kEye, 0.001, 2e-5, 52);
+  for (size_t i = 0; i < vb.size(); ++i) both.append(vb.points[i], 1.f);
+  const auto d = m.locate({both}, {});
+  ASSERT_EQ(d.size(), 2u);
+  for (const auto& x : d) {
+    const bool is_a = x.model == "housing";
+    const PoseError e = poseError(library()->model(x.model).info, m.centroid(x.model), x.pose, is_a ? a : b);
+    EXPECT_LT(e.translation, 1e-3) << x.model;
+    EXPECT_LT(e.rotation, 1 * M_PI / 180) << x.model;
+  }
 }
 
 // Fine PPF bins make the key range too large for the table's dense index (> 2^24 keys): the

@@ -41,6 +41,9 @@ struct ClusteringResult {
   std::vector<SceneCluster> clusters;  ///< largest first
   bool plane_found = false;
   Plane support;                  ///< the removed support plane (base frame)
+  /// where the scan saw the support: its inliers, one per 2 mm cell (the matcher's free-space
+  /// test: a part cannot stand where the camera saw the table behind it)
+  std::vector<Eigen::Vector3f> support_points;
   size_t input_points = 0, after_crop = 0, after_voxel = 0, after_plane = 0, non_finite = 0;
   std::vector<std::string> warnings;  ///< e.g. empty input, downsampled huge input
 };

@@ -86,6 +86,15 @@ struct MatchingConfig {
   /// (a thin flat part seen from above fits upside down as well). Used when locate() is given
   /// the plane; metres.
   double max_support_penetration = 0.003;
+  /// Parts rest on the support too: a pose whose lowest point is more than this above the
+  /// support plane floats and is discarded the same way (a shaft standing on its end seen as
+  /// upright with its flange in mid-air, a part fitted onto the top of a box). 0: off (parts
+  /// stacked on other parts, bins). Metres.
+  double max_support_gap = 0;
+  /// At most this share of the model's visible points may lie where the camera saw the support
+  /// behind them (locate() given the support's points): a part fitted onto a smaller object
+  /// overhangs it, and the table was seen under the overhang. 1: off.
+  double max_see_through = 1.0;
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
   int max_instances = 3;           ///< detections per cluster (touching parts)
@@ -108,6 +117,9 @@ struct PartDetection {
   double fitness = 0;    ///< share of visible model points within r_F of the scene
   double coverage = 0;   ///< share of the cluster's points explained by the model
   double rmse = 0;       ///< m
+  /// share of the model's visible points through which the camera saw the support behind
+  /// (free-space violation; 0 when locate() had no support points)
+  double see_through = 0;
   double score = 0;      ///< fitness × coverage (ranking)
   int cluster = -1;      ///< index of the input cluster
   int iterations = 0;    ///< RANSAC hypotheses drawn
@@ -175,10 +187,13 @@ class ModelMatcher {
   /// all-NaN clusters give a warning and no detection.
   /// `viewpoint` (scene frame) overrides config().viewpoint for this call. `support_plane`
   /// (a, b, c, d of a·x + b·y + c·z + d = 0, unit normal pointing up, scene frame), when given,
-  /// discards poses that sink the model into the support (see max_support_penetration).
+  /// discards poses that sink the model into the support or float above it (see
+  /// max_support_penetration, max_support_gap). `support_points` (scene frame), the points of
+  /// the support the scan saw, with the plane, turn on the free-space test (max_see_through).
   std::vector<PartDetection> locate(const std::vector<ScanCloud>& clusters, const std::vector<std::string>& models,
                                 MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
-                                const Eigen::Vector4f* support_plane = nullptr) const;
+                                const Eigen::Vector4f* support_plane = nullptr,
+                                const std::vector<Eigen::Vector3f>* support_points = nullptr) const;
 
   /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
   /// first locate(); unknown ids throw std::out_of_range.

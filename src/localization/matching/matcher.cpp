@@ -3,6 +3,7 @@
 #include <pcl/features/normal_3d.h>
 #include <pcl/search/kdtree.h>
 
+#include <numeric>
 #include <stdexcept>
 
 #include "cellsight/localization/fgr.hpp"
@@ -11,6 +12,9 @@
 namespace cellsight {
 namespace matching_detail {
 namespace {
+
+/// Flat faces smaller than this are not laid onto planar clusters: 25 coarse cells.
+float patchMinArea(const MatchingConfig& cfg) { return static_cast<float>(25 * cfg.voxel * cfg.voxel); }
 
 PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                     const Eigen::Vector4f* support, uint64_t seed) {
@@ -54,13 +58,13 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, PartDetection* c) {
     Refined r = icp(s, m, T0, cfg, points, polish);
     if (!r.T.matrix().allFinite()) return false;
-    if (support && belowSupport(m, r.T, *support) > cfg.max_support_penetration) return false;
+    if (support && offSupport(m, r.T, *support, cfg)) return false;
     auto score = [&](const Eigen::Isometry3f& T, PartDetection* out) {
       *out = d;
       out->pose = T.cast<double>();
       out->rmse = r.rmse;
       out->coverage = coverage(s, m, T, cfg.fitness_radius);
-      out->fitness = visibleFitness(s, m, T, cfg);
+      out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
       out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
     };
     score(r.T, c);
@@ -68,7 +72,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
     if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {
       const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, r.polished_fresh, cfg).inverse()).cast<float>();
       PartDetection centred;
-      if (T.matrix().allFinite() && !(support && belowSupport(m, T, *support) > cfg.max_support_penetration)) {
+      if (T.matrix().allFinite() && !(support && offSupport(m, T, *support, cfg))) {
         score(T, &centred);
         if (accepted(centred, cfg)) *c = centred;
       }
@@ -136,6 +140,7 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
     m->fine_tree.setInputCloud(toXyz(m->fine->points));
     if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
     m->caster.commit();
+    if (m->has_mesh) m->patches = facePatches(e.mesh, m->faces, patchMinArea(config_));
     std::lock_guard<std::mutex> lock(mutex_);
     return indices_.emplace(id, m).first->second;
   }
@@ -224,6 +229,7 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
   if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
   m->caster.commit();
   if (m->has_mesh) m->faces = planarFaces(e.mesh);
+  if (m->has_mesh) m->patches = facePatches(e.mesh, m->faces, patchMinArea(config_));
   if (m->has_mesh && config_.icp_mesh_polish && config_.closest_point_grid && e.mesh.faces.size() <= 5000) {
     const float dmin = static_cast<float>(std::max(3 * config_.icp_spacing, 0.5 * config_.fitness_radius));
     const float cell = static_cast<float>(std::max(2 * config_.icp_spacing, 0.001));
@@ -252,7 +258,8 @@ Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return 
 
 std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
                                             const std::vector<std::string>& models_in, MatchStats* stats,
-                                            const Eigen::Vector3f* viewpoint, const Eigen::Vector4f* support_plane) const {
+                                            const Eigen::Vector3f* viewpoint, const Eigen::Vector4f* support_plane,
+                                            const std::vector<Eigen::Vector3f>* support_points) const {
   const auto t0 = Clock::now();
   MatchingConfig cfg = config_;
   if (viewpoint) cfg.viewpoint = *viewpoint;
@@ -269,8 +276,12 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     std::vector<Vec3> points;
     std::unique_ptr<SceneData> scene;
     double scene_seconds = 0;
+    double min_coverage = 1e9;  // asked of a detection here: the config's, less on a second look
     std::vector<PartDetection> per_model;
   };
+  SupportSeen seen;
+  if (support_plane && support_points && cfg.max_see_through < 1)
+    seen = buildSupportSeen(*support_points, *support_plane, static_cast<float>(cfg.voxel));
   std::vector<PartDetection> out;
   std::vector<Work> round;
   for (size_t c = 0; c < clusters.size(); ++c) {
@@ -298,45 +309,69 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     parallelFor(round.size(), cfg.threads, [&](size_t i) {
       const auto t = Clock::now();
       round[i].scene = prepareScene(round[i].points, cfg);
+      round[i].scene->support_seen = &seen;
       round[i].scene_seconds = seconds(t);
     });
     for (const auto& w : round) st.scene_seconds += w.scene_seconds;
     std::vector<std::pair<size_t, size_t>> pairs;
+    // a cluster larger than every model holds several parts (touching ones that clustering
+    // could not split): every model is tried on it and coverage is not asked of the first
+    // found; what it leaves is searched again
+    std::vector<MatchingConfig> wcfg(round.size(), cfg);
     for (size_t w = 0; w < round.size(); ++w) {
       round[w].per_model.assign(models.size(), PartDetection());
+      std::vector<size_t> fit;
       for (size_t m = 0; m < models.size(); ++m) {
         const bool too_big = cfg.min_coverage > 0 &&
                              round[w].scene->diameter > 1.15f * idx[m]->diameter + 2 * static_cast<float>(cfg.voxel);
-        if (too_big) {
-          ++st.pairs_skipped_by_size;
-          continue;
-        }
-        pairs.emplace_back(w, m);
+        if (!too_big) fit.push_back(m);
       }
+      if (fit.empty() && cfg.min_coverage > 0 && cfg.max_instances > 1) round[w].min_coverage = 0;
+      if (round[w].min_coverage < cfg.min_coverage) {
+        fit.resize(models.size());
+        std::iota(fit.begin(), fit.end(), size_t{0});
+      } else {
+        st.pairs_skipped_by_size += models.size() - fit.size();
+      }
+      wcfg[w].min_coverage = std::min(cfg.min_coverage, round[w].min_coverage);
+      for (size_t m : fit) pairs.emplace_back(w, m);
     }
     st.pairs += pairs.size();
     parallelFor(pairs.size(), cfg.threads, [&](size_t k) {
       const auto [w, m] = pairs[k];
       if (round[w].scene->coarse.size() < 3) return;
       const uint64_t seed = cfg.seed + 7919 * static_cast<uint64_t>(round[w].cluster) + 104729 * m + 15485863ull * instance;
-      round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], cfg, support_plane, seed);
+      round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], wcfg[w], support_plane, seed);
       round[w].per_model[m].cluster = round[w].cluster;
     });
     std::vector<Work> next;
-    for (auto& w : round) {
+    for (size_t wi = 0; wi < round.size(); ++wi) {
+      Work& w = round[wi];
       const PartDetection* best = nullptr;
       size_t best_m = 0;
       for (size_t m = 0; m < models.size(); ++m) {
         const PartDetection& d = w.per_model[m];
         st.coarse_seconds += d.coarse_seconds;
         st.refine_seconds += d.refine_seconds;
-        if (!d.model.empty() && !accepted(d, cfg)) st.rejected.push_back(d);
-        if (accepted(d, cfg) && (!best || d.score > best->score)) {
+        if (!d.model.empty() && !accepted(d, wcfg[wi])) st.rejected.push_back(d);
+        if (accepted(d, wcfg[wi]) && (!best || d.score > best->score)) {
           best = &d;
           best_m = m;
         }
       }
-      if (!best) continue;
+      if (!best) {
+        // nothing explains enough of the cluster: it may hold two touching parts that
+        // clustering could not split; searched once more asking half the coverage (the part
+        // found then leaves the rest to the next round at the full coverage)
+        if (cfg.min_coverage > 0 && w.min_coverage >= cfg.min_coverage && cfg.max_instances > 1) {
+          Work again;
+          again.cluster = w.cluster;
+          again.points = std::move(w.points);
+          again.min_coverage = 0.5 * cfg.min_coverage;
+          next.push_back(std::move(again));
+        }
+        continue;
+      }
       PartDetection d = *best;
       // leftover points (another part touching this one) get another search
       const ModelIndex& mi = *idx[best_m];

@@ -33,7 +33,7 @@ MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_dia
   MatchingConfig c = base;
   for (double* v : {&c.voxel, &c.normal_radius, &c.feature_radius, &c.ppf_sampling, &c.ppf_distance_step,
                     &c.inlier_distance, &c.icp_spacing, &c.icp_huber_floor, &c.icp_slack_range, &c.icp_slack_tolerance,
-                    &c.fitness_radius, &c.max_rmse, &c.max_support_penetration})
+                    &c.fitness_radius, &c.max_rmse, &c.max_support_penetration, &c.max_support_gap})
     *v *= r;
   return c;
 }
@@ -100,6 +100,9 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   if (m.has("viewpoint")) c.viewpoint = m.getVector3("viewpoint").cast<float>();
   positive("max_view_angle", c.max_view_angle);
   positive("max_support_penetration", c.max_support_penetration);
+  c.max_support_gap = m.getDouble("max_support_gap", c.max_support_gap);
+  if (!(c.max_support_gap >= 0)) m.fail("max_support_gap", "must be >= 0 (0: off)");
+  share("max_see_through", c.max_see_through);
   c.max_instances = m.getInt("max_instances", c.max_instances);
   if (const auto bad = checkAcceptance(acceptanceOf(c)); !bad.first.empty()) m.fail(bad.first, bad.second);
   c.min_instance_points = m.getInt("min_instance_points", c.min_instance_points);

@@ -117,6 +117,16 @@ struct PpfTable {
 
 }  // namespace matching_detail
 
+namespace matching_detail {
+/// A flat face of a model mesh (a group of coplanar triangles): outward normal, centroid,
+/// major in-plane axis, area. A cluster that is one flat patch is aligned with these.
+struct FacePatch {
+  Vec3 n = Vec3::UnitZ(), c = Vec3::Zero(), axis = Vec3::UnitX();
+  float area = 0;
+};
+std::vector<FacePatch> facePatches(const TriangleMesh& mesh, const PlanarFaces& faces, float min_area);
+}  // namespace matching_detail
+
 struct ModelMatcher::ModelIndex {
   std::string id;
   ModelInfo info;
@@ -132,6 +142,7 @@ struct ModelMatcher::ModelIndex {
   RayCaster caster;  // the mesh in the model frame (self-occlusion)
   ClosestPointGrid closest;  // candidate triangles per cell for the polish (empty: Embree only)
   PlanarFaces faces;         // flat faces and their creases (slack centring)
+  std::vector<matching_detail::FacePatch> patches;  // the larger flat faces (planar-view hypotheses)
   bool has_mesh = true;  // false for a cloud model: visibility from the normals only
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   float diameter = 0;
@@ -140,9 +151,34 @@ struct ModelMatcher::ModelIndex {
 
 namespace matching_detail {
 
+/// Where the support (the table the clustering removed) was seen: a bitmap of cells on the
+/// plane, eroded by one cell so that silhouettes blurred by calibration and mixed pixels do not
+/// count. A model point the camera would see, whose view ray runs on to a seen cell, cannot be
+/// there: the camera saw through it (free-space violation).
+struct SupportSeen {
+  Eigen::Vector3f n = Eigen::Vector3f::UnitZ(), u = Eigen::Vector3f::UnitX(), v = Eigen::Vector3f::UnitY();
+  float d = 0, cell = 0.002f;
+  Eigen::Vector2f lo = Eigen::Vector2f::Zero();
+  int nu = 0, nv = 0;
+  std::vector<uint8_t> seen;
+  bool empty() const { return seen.empty(); }
+  /// the view ray eye → p meets the plane on a seen cell (p above the plane by > min_height)
+  bool seenBehind(const Vec3& eye, const Vec3& p, float min_height) const;
+};
+SupportSeen buildSupportSeen(const std::vector<Vec3>& points, const Eigen::Vector4f& plane, float cell);
+
+/// The plane most of a cluster lies on, when it does (a part seen only by one flat face).
+struct ScenePlane {
+  bool found = false;
+  Vec3 n = Vec3::UnitZ(), c = Vec3::Zero(), axis = Vec3::UnitX();  // normal towards the viewpoint, centroid, major axis
+  float area = 0;  // m², from the inliers' voxel count
+};
+
 /// One cluster prepared once for every model: coarse points with normals and FPFH, the points
 /// ICP uses, and a k-d tree over all its points for the fitness test.
 struct SceneData {
+  ScenePlane plane;
+  const SupportSeen* support_seen = nullptr;  // shared by the clusters of one locate() call
   std::vector<Vec3> all;       // finite input points
   ScanCloud coarse;            // voxelised, normals toward the viewpoint
   std::vector<Fpfh> fpfh;
@@ -186,12 +222,18 @@ bool validFpfh(const Fpfh& f);
 /// Thins a cloud with normals to one point per cell (the first one met).
 ScanCloud thinned(const ScanCloud& c, double cell);
 std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const MatchingConfig& cfg);
+/// The cluster's plane when >= 90 % of its coarse points lie within inlier_distance / 2 of it.
+ScenePlane scenePlane(const ScanCloud& coarse, const MatchingConfig& cfg);
 /// At most `cap` points: a voxel grid of `leaf` (cell centroids), then every k-th point.
 std::vector<Vec3> capPoints(const std::vector<Vec3>& pts, double leaf, size_t cap);
 
 // ---- hypothesis_scoring.cpp
 /// Counts scene points explained by the model under T (model → scene), with early exit when
 /// the first `probe` points already promise less than `floor`.
+/// Poses that lay a model's flat faces onto the cluster's plane (ScenePlane), centroid on
+/// centroid, turned about the normal in steps of 30° from the major axes: the hypotheses for a
+/// part seen by one flat face only, whose point pairs all share one feature that PPF leaves out.
+std::vector<Hypothesis> planarHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, size_t max_faces);
 int scoreHypothesis(const SceneData& s, const std::vector<int>& order, const ModelMatcher::ModelIndex& m,
                     const Eigen::Isometry3f& T, float inlier2, float cos_normal, int probe, double floor_share);
 /// Whether two poses differ by more than dt (m) or 0.2 rad.
@@ -234,10 +276,16 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
 double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, double r);
 /// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
 /// itself) that have a scene point within r_F.
+/// see_through (optional): share of those visible points whose view ray runs on to seen support.
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg);
+                      const MatchingConfig& cfg, double* see_through = nullptr);
 /// How far the model under T reaches below the support plane (m; <= 0: not at all).
 float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane);
+/// The pose is not physical for a part resting on the support: sunk deeper than
+/// max_support_penetration, or (max_support_gap > 0) its lowest point higher than that above
+/// it; `slack` widens both (coarse poses are a few millimetres off).
+bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane,
+                const MatchingConfig& cfg, float slack = 0.f);
 /// The detection passes min_fitness, min_coverage and max_rmse.
 bool accepted(const PartDetection& d, const MatchingConfig& cfg);
 

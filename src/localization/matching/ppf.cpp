@@ -149,12 +149,85 @@ PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins, size_t max_buck
 }
 
 /// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
+std::vector<FacePatch> facePatches(const TriangleMesh& mesh, const PlanarFaces& faces, float min_area) {
+  struct Sum {
+    double area = 0;
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d cc = Eigen::Matrix3d::Zero();
+  };
+  std::vector<Sum> sum(faces.groups.size());
+  for (size_t f = 0; f < mesh.faces.size() && f < faces.group.size(); ++f) {
+    const int g = faces.group[f];
+    if (g < 0) continue;
+    const auto& t = mesh.faces[f];
+    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>(), b = mesh.vertices[t[1]].cast<double>(),
+                          c = mesh.vertices[t[2]].cast<double>();
+    const double area = 0.5 * (b - a).cross(c - a).norm();
+    Sum& S = sum[static_cast<size_t>(g)];
+    S.area += area;
+    // the triangle's second moment (exact: vertices and centroid with weights 1/12 and 9/12)
+    const Eigen::Vector3d m = (a + b + c) / 3;
+    S.c += area * m;
+    S.cc += area * (0.75 * m * m.transpose() + (a * a.transpose() + b * b.transpose() + c * c.transpose()) / 12.0);
+  }
+  std::vector<FacePatch> out;
+  for (size_t g = 0; g < sum.size(); ++g) {
+    const Sum& S = sum[g];
+    if (S.area < min_area) continue;
+    FacePatch p;
+    const Eigen::Vector3d c = S.c / S.area;
+    const Eigen::Matrix3d cov = S.cc / S.area - c * c.transpose();
+    p.n = faces.groups[g].normal.cast<float>().normalized();
+    p.c = c.cast<float>();
+    p.area = static_cast<float>(S.area);
+    // major axis in the face's plane
+    const Eigen::Vector3d n = faces.groups[g].normal.normalized();
+    const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - n * n.transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(P * cov * P);
+    p.axis = es.eigenvectors().col(2).cast<float>().normalized();
+    out.push_back(p);
+  }
+  return out;
+}
+
+std::vector<Hypothesis> planarHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, size_t max_faces) {
+  std::vector<Hypothesis> out;
+  if (!s.plane.found || m.patches.empty()) return out;
+  // faces that can hold what was seen, the closest in area first
+  std::vector<const FacePatch*> faces;
+  for (const auto& f : m.patches)
+    if (f.area >= 0.6f * s.plane.area) faces.push_back(&f);
+  std::sort(faces.begin(), faces.end(), [&](const FacePatch* a, const FacePatch* b) {
+    return std::abs(a->area - s.plane.area) < std::abs(b->area - s.plane.area);
+  });
+  if (faces.size() > max_faces) faces.resize(max_faces);
+  for (const FacePatch* f : faces) {
+    // the face's normal onto the scene's, then its major axis onto the scene's
+    const Eigen::Quaternionf q0 = Eigen::Quaternionf::FromTwoVectors(f->n, s.plane.n);
+    const Vec3 a = q0 * f->axis;
+    const Vec3 a_in = (a - a.dot(s.plane.n) * s.plane.n).normalized();
+    const float ang0 = std::atan2(a_in.cross(s.plane.axis).dot(s.plane.n), a_in.dot(s.plane.axis));
+    for (int k = 0; k < 12; ++k) {
+      const Eigen::Matrix3f R = Eigen::AngleAxisf(ang0 + static_cast<float>(k) * static_cast<float>(M_PI) / 6, s.plane.n) *
+                                q0.toRotationMatrix();
+      Hypothesis h;
+      h.T.linear() = R;
+      h.T.translation() = s.plane.c - R * f->c;
+      out.push_back(h);
+    }
+  }
+  return out;
+}
+
 std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                                       const Eigen::Vector4f* support, int* iterations) {
   std::vector<Hypothesis> votes = ppfVoting(s.ppf, m, cfg.ppf_ref_step);
   *iterations = static_cast<int>(votes.size());
   std::sort(votes.begin(), votes.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
   if (votes.size() > static_cast<size_t>(cfg.ppf_candidates)) votes.resize(cfg.ppf_candidates);
+  // a cluster that is one flat patch: its pairs' features were left out of the table (flat-face
+  // buckets); its faces are laid onto the patch instead, ranked with the votes
+  for (const Hypothesis& h : planarHypotheses(s, m, 6)) votes.push_back(h);
   // scene points in a random (fixed) order: a pose whose first `probe` points explain less
   // than half the best pose's share so far stops there (its score extrapolated)
   std::vector<int> order(s.coarse.size());
@@ -169,10 +242,10 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   const float inl2 = static_cast<float>(cfg.inlier_distance * cfg.inlier_distance);
   std::vector<Hypothesis> top;
   const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
-  // a coarse pose may be a few millimetres off: only clearly sunken ones are dropped here
-  const float sunk = static_cast<float>(cfg.max_support_penetration + 2 * cfg.inlier_distance);
+  // a coarse pose may be a few millimetres off: only clearly sunken or floating ones are dropped here
+  const float slack = static_cast<float>(2 * cfg.inlier_distance);
   for (auto& v : votes) {
-    if (support && belowSupport(m, v.T, *support) > sunk) continue;
+    if (support && offSupport(m, v.T, *support, cfg, slack)) continue;
     v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), probe, 0.5 * best_score / static_cast<double>(order.size()));
     best_score = std::max(best_score, v.score);
     bool merged = false;

@@ -56,6 +56,44 @@ ScanCloud thinned(const ScanCloud& c, double cell) {
   return out;
 }
 
+/// The plane of a cluster that is (almost) one flat patch: a PCA plane, refitted to the points
+/// within half the inlier distance; found when they are at least 90 % of the points.
+ScenePlane scenePlane(const ScanCloud& coarse, const MatchingConfig& cfg) {
+  ScenePlane out;
+  if (coarse.size() < 10) return out;
+  const float band = static_cast<float>(0.5 * cfg.inlier_distance);
+  std::vector<char> in(coarse.size(), 1);
+  Vec3 n = Vec3::UnitZ(), c = Vec3::Zero();
+  Eigen::Matrix3f cov;
+  size_t count = 0;
+  for (int pass = 0; pass < 2; ++pass) {
+    c.setZero();
+    count = 0;
+    for (size_t i = 0; i < coarse.size(); ++i)
+      if (in[i]) {
+        c += coarse.points[i];
+        ++count;
+      }
+    if (count < 10) return out;
+    c /= static_cast<float>(count);
+    cov.setZero();
+    for (size_t i = 0; i < coarse.size(); ++i)
+      if (in[i]) cov += (coarse.points[i] - c) * (coarse.points[i] - c).transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
+    n = es.eigenvectors().col(0);
+    for (size_t i = 0; i < coarse.size(); ++i) in[i] = std::abs(n.dot(coarse.points[i] - c)) <= band;
+  }
+  count = static_cast<size_t>(std::count(in.begin(), in.end(), 1));
+  if (count < 0.9 * coarse.size()) return out;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
+  out.found = true;
+  out.n = n.dot(cfg.viewpoint - c) < 0 ? -n : n;
+  out.c = c;
+  out.axis = es.eigenvectors().col(2).normalized();
+  out.area = static_cast<float>(count) * static_cast<float>(cfg.voxel * cfg.voxel);
+  return out;
+}
+
 std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const MatchingConfig& cfg) {
   auto s = std::make_unique<SceneData>();
   s->all = finite;
@@ -116,6 +154,7 @@ std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const M
   };
   const Vec3 b = farthest(s->coarse.points[0]), c = farthest(b);
   s->diameter = (b - c).norm();
+  s->plane = scenePlane(s->coarse, cfg);
   if (cfg.coarse == "ppf") return s;
   pcl::FPFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::FPFHSignature33> fe;
   fe.setInputCloud(kept);

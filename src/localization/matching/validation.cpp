@@ -23,15 +23,70 @@ double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eig
 
 /// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
 /// itself) that have a scene point within r_F.
+SupportSeen buildSupportSeen(const std::vector<Vec3>& points, const Eigen::Vector4f& plane, float cell) {
+  SupportSeen g;
+  const Vec3 n = plane.head<3>();
+  if (points.empty() || !(cell > 0) || !plane.allFinite() || std::abs(n.norm() - 1.f) > 1e-3f) return g;
+  g.n = n;
+  g.d = plane.w();
+  g.u = n.unitOrthogonal();
+  g.v = n.cross(g.u);
+  g.cell = cell;
+  Eigen::Vector2f lo = Eigen::Vector2f::Constant(std::numeric_limits<float>::max()), hi = -lo;
+  std::vector<Eigen::Vector2f> uv;
+  uv.reserve(points.size());
+  for (const auto& p : points) {
+    if (!p.allFinite()) continue;
+    uv.emplace_back(g.u.dot(p), g.v.dot(p));
+    lo = lo.cwiseMin(uv.back());
+    hi = hi.cwiseMax(uv.back());
+  }
+  if (uv.empty()) return g;
+  // at most 16 M cells: a huge support is mapped coarser
+  const Eigen::Vector2f size = hi - lo;
+  g.cell = std::max(cell, std::sqrt(size.x() * size.y() / 16e6f));
+  g.lo = lo;
+  g.nu = static_cast<int>(size.x() / g.cell) + 1;
+  g.nv = static_cast<int>(size.y() / g.cell) + 1;
+  std::vector<uint8_t> hit(static_cast<size_t>(g.nu) * g.nv, 0);
+  for (const auto& q : uv) {
+    const int i = std::min(g.nu - 1, static_cast<int>((q.x() - lo.x()) / g.cell));
+    const int j = std::min(g.nv - 1, static_cast<int>((q.y() - lo.y()) / g.cell));
+    hit[static_cast<size_t>(j) * g.nu + i] = 1;
+  }
+  // eroded: a cell counts as seen when it and its 8 neighbours are
+  g.seen.assign(hit.size(), 0);
+  for (int j = 1; j + 1 < g.nv; ++j) {
+    for (int i = 1; i + 1 < g.nu; ++i) {
+      bool all = true;
+      for (int dj = -1; dj <= 1 && all; ++dj)
+        for (int di = -1; di <= 1 && all; ++di) all = hit[static_cast<size_t>(j + dj) * g.nu + i + di] != 0;
+      g.seen[static_cast<size_t>(j) * g.nu + i] = all;
+    }
+  }
+  return g;
+}
+
+bool SupportSeen::seenBehind(const Vec3& eye, const Vec3& p, float min_height) const {
+  const float hp = n.dot(p) + d, he = n.dot(eye) + d;
+  if (hp <= min_height || he <= hp) return false;  // low, or the eye is not above the point
+  const Vec3 q = p + (p - eye) * (hp / (he - hp));  // the ray eye → p continued to the plane
+  const int i = static_cast<int>(std::floor((u.dot(q) - lo.x()) / cell));
+  const int j = static_cast<int>(std::floor((v.dot(q) - lo.y()) / cell));
+  return i >= 0 && j >= 0 && i < nu && j < nv && seen[static_cast<size_t>(j) * nu + i] != 0;
+}
+
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg) {
+                      const MatchingConfig& cfg, double* see_through) {
   const Eigen::Isometry3f Ti = T.inverse();
   const Vec3 eye = Ti * cfg.viewpoint;
   const float cos_max = std::cos(static_cast<float>(cfg.max_view_angle));
   const float r2 = static_cast<float>(cfg.fitness_radius * cfg.fitness_radius);
   std::vector<int> idx(1);
   std::vector<float> d2(1);
-  size_t visible = 0, matched = 0;
+  size_t visible = 0, matched = 0, through = 0;
+  const SupportSeen* seen = see_through && s.support_seen && !s.support_seen->empty() ? s.support_seen : nullptr;
+  const float min_height = static_cast<float>(getenv("CS_MINH") ? atof(getenv("CS_MINH")) : cfg.voxel);
   const auto& mp = m.coarse->points;
   const auto& mn = m.coarse->normals;
   for (size_t i = 0; i < mp.size(); ++i) {
@@ -45,12 +100,14 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     }
     ++visible;
     const Vec3 p = T * mp[i];
+    if (seen && seen->seenBehind(cfg.viewpoint, p, min_height)) ++through;
     if (cfg.scene_search == "grid") {
       matched += s.grid.anyWithin(p, static_cast<float>(cfg.fitness_radius));
     } else if (s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2) {
       ++matched;
     }
   }
+  if (see_through) *see_through = visible ? static_cast<double>(through) / visible : 0.0;
   return visible ? static_cast<double>(matched) / visible : 0.0;
 }
 
@@ -61,8 +118,16 @@ float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T
   return m.extremes.empty() ? 0.f : -lowest;
 }
 
+bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane,
+                const MatchingConfig& cfg, float slack) {
+  const float below = belowSupport(m, T, plane);
+  if (below > static_cast<float>(cfg.max_support_penetration) + slack) return true;
+  return cfg.max_support_gap > 0 && -below > static_cast<float>(cfg.max_support_gap) + slack;
+}
+
 bool accepted(const PartDetection& d, const MatchingConfig& cfg) {
-  return d.score > 0 && d.fitness >= cfg.min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse;
+  return d.score > 0 && d.fitness >= cfg.min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse &&
+         d.see_through <= cfg.max_see_through;
 }
 
 }  // namespace matching_detail
