@@ -86,7 +86,7 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   std::vector<float> d2(1);
   size_t visible = 0, matched = 0, through = 0;
   const SupportSeen* seen = see_through && s.support_seen && !s.support_seen->empty() ? s.support_seen : nullptr;
-  const float min_height = static_cast<float>(getenv("CS_MINH") ? atof(getenv("CS_MINH")) : cfg.voxel);
+  const float min_height = static_cast<float>(cfg.voxel);  // the lowest band: the part's own footprint
   const auto& mp = m.coarse->points;
   const auto& mn = m.coarse->normals;
   for (size_t i = 0; i < mp.size(); ++i) {
