@@ -119,7 +119,7 @@ struct PpfTable {
 
 namespace matching_detail {
 /// A flat face of a model mesh (a group of coplanar triangles): outward normal, centroid,
-/// major in-plane axis, area. A cluster that is one flat patch is aligned with these.
+/// major in-plane axis, area. A cluster that is mostly one flat patch is aligned with these.
 struct FacePatch {
   Vec3 n = Vec3::UnitZ(), c = Vec3::Zero(), axis = Vec3::UnitX();
   float area = 0;
@@ -222,7 +222,7 @@ bool validFpfh(const Fpfh& f);
 /// Thins a cloud with normals to one point per cell (the first one met).
 ScanCloud thinned(const ScanCloud& c, double cell);
 std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const MatchingConfig& cfg);
-/// The cluster's plane when >= 90 % of its coarse points lie within inlier_distance / 2 of it.
+/// The cluster's plane when >= 60 % of its coarse points lie within inlier_distance / 2 of it.
 ScenePlane scenePlane(const ScanCloud& coarse, const MatchingConfig& cfg);
 /// At most `cap` points: a voxel grid of `leaf` (cell centroids), then every k-th point.
 std::vector<Vec3> capPoints(const std::vector<Vec3>& pts, double leaf, size_t cap);

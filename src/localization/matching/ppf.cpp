@@ -225,7 +225,7 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   *iterations = static_cast<int>(votes.size());
   std::sort(votes.begin(), votes.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
   if (votes.size() > static_cast<size_t>(cfg.ppf_candidates)) votes.resize(cfg.ppf_candidates);
-  // a cluster that is one flat patch: its pairs' features were left out of the table (flat-face
+  // a cluster that is mostly one flat patch: its pairs' features were left out of the table (flat-face
   // buckets); its faces are laid onto the patch instead, ranked with the votes
   for (const Hypothesis& h : planarHypotheses(s, m, 6)) votes.push_back(h);
   // scene points in a random (fixed) order: a pose whose first `probe` points explain less

@@ -56,8 +56,9 @@ ScanCloud thinned(const ScanCloud& c, double cell) {
   return out;
 }
 
-/// The plane of a cluster that is (almost) one flat patch: a PCA plane, refitted to the points
-/// within half the inlier distance; found when they are at least 90 % of the points.
+/// The plane of a cluster that is mostly one flat patch: a PCA plane, refitted to the points
+/// within half the inlier distance; found when they are at least 60 % of the points (the rest:
+/// a touching part, a rim).
 ScenePlane scenePlane(const ScanCloud& coarse, const MatchingConfig& cfg) {
   ScenePlane out;
   if (coarse.size() < 10) return out;
@@ -84,7 +85,7 @@ ScenePlane scenePlane(const ScanCloud& coarse, const MatchingConfig& cfg) {
     for (size_t i = 0; i < coarse.size(); ++i) in[i] = std::abs(n.dot(coarse.points[i] - c)) <= band;
   }
   count = static_cast<size_t>(std::count(in.begin(), in.end(), 1));
-  if (count < 0.9 * coarse.size()) return out;
+  if (count < 0.6 * coarse.size()) return out;
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
   out.found = true;
   out.n = n.dot(cfg.viewpoint - c) < 0 ? -n : n;
