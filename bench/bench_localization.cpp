@@ -11,8 +11,16 @@
 // or gets wrong is a failure, never a time; speed is compared per case only where both methods
 // succeed, and a speed ratio is claimed only against a peer that succeeds on >= 90 % of the cases.
 // Each scene runs 3 times and counts its fastest run (success from the first).
+// Real cases beside the simulated ones (../shared/data/pointclouds, when present): Stanford bunny
+// bun045 onto bun000 (truth from bun.conf), PCL's milk carton in its Kinect scene (truth: the
+// identity), and the UWA parasaurolophus in rs1 and rs22 (no truth shipped: the reference is our
+// pose with the tuned config/matching_uwa.yaml, accepted at fitness >= 0.5 — agreement with it, not
+// accuracy). Every method runs there with sizes scaled to the part (voxel = max(diagonal / 50,
+// 2 x the scene's point spacing), as cellsight_locate without --matching), the FPFH peers at 0.75 /
+// 1 / 1.5 x of it.
 // Output: JSON (argv[1], default bench_localization.json) + Markdown tables on stdout.
-// argv[2]: clouds per part (default 8); argv[3]: run only the methods whose name contains it.
+// argv[2]: clouds per part (default 8); argv[3]: run only the methods whose name contains it;
+// argv[4]: "sim" or "real" to run one of the two sets (default both).
 #include <pcl/console/print.h>
 #include <pcl/features/fpfh.h>
 #include <pcl/features/normal_3d.h>
@@ -39,6 +47,8 @@
 #include <numeric>
 #include <random>
 
+#include "cellsight/common/mesh.hpp"
+#include "cellsight/common/scan_cloud.hpp"
 #include "cellsight/localization/fgr.hpp"
 #include "cellsight/localization/localization_eval.hpp"
 #include "cellsight/localization/model_matching.hpp"
@@ -66,7 +76,19 @@ struct Case {
   std::string model;
   Eigen::Isometry3d truth;
   ScanCloud cloud;
+  std::string name;                 // real cases: what it is
+  double scale = 1;                 // sizes of every method relative to the parts' (real cases)
+  Eigen::Vector3f eye = kEye;       // the sensor (scene normals point to it)
+  double max_t = 2e-3, max_r = 2 * M_PI / 180;  // success
 };
+
+/// Per model id of the real library: its sizes' scale and sensor (the parts: 1 and kEye).
+struct RealModel {
+  double scale = 1, spacing = 0;
+  Eigen::Vector3f eye = kEye;
+};
+std::map<std::string, RealModel> g_real;
+double scaleOf(const std::string& id) { return g_real.count(id) ? g_real.at(id).scale : 1.0; }
 
 std::vector<Case> makeCases(const ModelLibrary& lib, int per_part) {
   std::vector<Case> out;
@@ -103,7 +125,7 @@ struct PreparedScene {
   pcl::PointCloud<pcl::FPFHSignature33>::Ptr fpfh;
 };
 
-PreparedScene prepare(const ScanCloud& scene, const Tuning& t = kDefault) {
+PreparedScene prepare(const ScanCloud& scene, const Tuning& t = kDefault, const Eigen::Vector3f& eye = kEye) {
   pcl::PointCloud<pcl::PointXYZ>::Ptr all(new pcl::PointCloud<pcl::PointXYZ>), down(new pcl::PointCloud<pcl::PointXYZ>);
   for (const auto& p : scene.points) all->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
   pcl::VoxelGrid<pcl::PointXYZ> vg;
@@ -114,7 +136,7 @@ PreparedScene prepare(const ScanCloud& scene, const Tuning& t = kDefault) {
   ne.setInputCloud(down);
   ne.setSearchSurface(all);
   ne.setRadiusSearch(t.normal);
-  ne.setViewPoint(kEye.x(), kEye.y(), kEye.z());
+  ne.setViewPoint(eye.x(), eye.y(), eye.z());
   pcl::PointCloud<pcl::Normal>::Ptr n(new pcl::PointCloud<pcl::Normal>);
   ne.compute(*n);
   PreparedScene s;
@@ -163,7 +185,7 @@ Model modelOf(const ModelLibrary& lib, const std::string& id, const Tuning& t) {
 
 std::shared_ptr<const std::map<std::string, Model>> allModels(const ModelLibrary& lib, const Tuning& t) {
   auto models = std::make_shared<std::map<std::string, Model>>();
-  for (const auto& id : lib.ids()) (*models)[id] = modelOf(lib, id, t);
+  for (const auto& id : lib.ids()) (*models)[id] = modelOf(lib, id, t.scaled(scaleOf(id)));
   return models;
 }
 
@@ -242,12 +264,13 @@ json runMethod(const std::string& name, const Method& make, const std::vector<Ca
     bool success = false;
     if (!failed) {
       const PoseError e = poseError(lib->model(c.model).info, centroids.centroid(c.model), T, c.truth);
-      success = e.translation <= 2e-3 && e.rotation <= 2 * M_PI / 180;
+      success = e.translation <= c.max_t && e.rotation <= c.max_r;
     }
     ok += success;
     threw += failed;
     if (success) ok_secs.push_back(best);
     json jc = {{"model", c.model}, {"success", success}, {"threw", failed}};
+    if (!c.name.empty()) jc["case"] = c.name;
     if (success) jc["seconds"] = best;
     if (failed) jc["error"] = error;
     per_case.push_back(jc);
@@ -259,6 +282,88 @@ json runMethod(const std::string& name, const Method& make, const std::vector<Ca
           {"scenes", cases.size()},
           {"repetitions_per_scene", kRepetitions},
           {"cases", per_case}};
+}
+
+/// The real cases (empty when ../shared/data is absent); their models go into `lib`.
+std::vector<Case> realCases(ModelLibrary* lib, json* described) {
+  const std::string root = kRoot + "/../shared/data/pointclouds";
+  std::vector<Case> out;
+  if (!std::ifstream(root + "/pcl/milk.pcd")) return out;
+  auto scaled = [](ScanCloud c, float f) {
+    for (auto& p : c.points) p *= f;
+    return c;
+  };
+  // sizes as cellsight_locate scales its defaults: voxel = max(diagonal / 50, 2 x spacing)
+  auto addModel = [&](const std::string& id, const ScanCloud& scene, const Eigen::Vector3f& eye) {
+    RealModel r;
+    r.spacing = medianPointSpacing(scene);
+    r.eye = eye;
+    r.scale = std::max(lib->model(id).bounds.diagonal().norm() / 50.0, 2 * r.spacing) / kVoxel;
+    g_real[id] = r;
+  };
+  auto addCase = [&](const std::string& name, const std::string& id, ScanCloud scene, const Eigen::Isometry3d& truth,
+                     double max_t, double max_r_deg, const std::string& truth_kind) {
+    Case c;
+    c.name = name;
+    c.model = id;
+    c.truth = truth;
+    c.cloud = std::move(scene);
+    c.scale = g_real.at(id).scale;
+    c.eye = g_real.at(id).eye;
+    c.max_t = max_t;
+    c.max_r = max_r_deg * M_PI / 180;
+    (*described).push_back({{"case", name}, {"model", id}, {"scene_points", c.cloud.size()}, {"truth", truth_kind},
+                            {"success", {{"max_t_mm", max_t * 1e3}, {"max_r_deg", max_r_deg}}},
+                            {"voxel_m", kVoxel * c.scale}});
+    out.push_back(std::move(c));
+  };
+  {  // Stanford bunny: bun045 onto bun000, truth from bun.conf
+    const std::string dir = root + "/stanford_bunny";
+    std::ifstream tf(dir + "/T_bun045_to_bun000.txt");
+    Eigen::Matrix4d M;
+    for (int r = 0; r < 4; ++r)
+      for (int k = 0; k < 4; ++k) tf >> M(r, k);
+    const Eigen::Vector3f sensor(0, 0, 1);
+    lib->addCloudModel("bunny045", loadCloud(dir + "/bun045.ply"), sensor);
+    ScanCloud scene = loadCloud(dir + "/bun000.ply");
+    addModel("bunny045", scene, sensor);
+    addCase("bunny bun045 -> bun000", "bunny045", std::move(scene), Eigen::Isometry3d(M), 2e-3, 2, "bun.conf");
+  }
+  {  // PCL milk carton cut out of its Kinect scene: truth the identity
+    lib->addCloudModel("milk", loadCloud(root + "/pcl/milk.pcd"), Eigen::Vector3f::Zero());
+    ScanCloud scene = loadCloud(root + "/pcl/milk_cartoon_all_small_clorox.pcd");
+    addModel("milk", scene, Eigen::Vector3f::Zero());
+    addCase("PCL milk in milk_cartoon_all_small_clorox", "milk", std::move(scene), Eigen::Isometry3d::Identity(), 5e-3, 2,
+            "identity (cut out of the scene)");
+  }
+  {  // UWA parasaurolophus (millimetres): reference = ours with the tuned settings, fitness >= 0.5
+    TriangleMesh mesh = loadMesh(root + "/uwa/parasaurolophus_6700.ply");
+    for (auto& v : mesh.vertices) v *= 0.001f;
+    lib->addMeshModel("parasaurolophus", mesh);
+    auto ref_lib = std::make_shared<ModelLibrary>();
+    ref_lib->addMeshModel("parasaurolophus", mesh);
+    MatchingConfig cfg = loadMatchingConfig(kRoot + "/config/matching_uwa.yaml");
+    cfg.min_coverage = 0;
+    cfg.max_instances = 1;
+    ModelMatcher reference(ref_lib, cfg);
+    bool first = true;
+    for (const std::string f : {"rs1_normals.ply", "rs22_proc2.ply"}) {
+      ScanCloud scene = scaled(loadCloud(root + "/uwa/" + f), 0.001f);
+      if (first) addModel("parasaurolophus", scene, Eigen::Vector3f::Zero());
+      first = false;
+      const auto d = reference.locate({scene}, {"parasaurolophus"});
+      if (d.empty() || d[0].fitness < 0.5) {
+        std::printf("UWA %s: no reference pose (ours with config/matching_uwa.yaml did not reach fitness 0.5): skipped\n",
+                    f.c_str());
+        continue;
+      }
+      char kind[160];
+      std::snprintf(kind, sizeof(kind), "reference: ours with config/matching_uwa.yaml, fitness %.3f (no truth shipped)",
+                    d[0].fitness);
+      addCase("UWA parasaurolophus in " + f, "parasaurolophus", std::move(scene), d[0].pose, 5e-3, 2, kind);
+    }
+  }
+  return out;
 }
 
 }  // namespace
@@ -274,18 +379,35 @@ int main(int argc, char** argv) {
   std::vector<std::pair<std::string, Method>> methods;
   auto ours = [](const std::string& coarse, bool library_search = false) {
     return [coarse, library_search](const std::shared_ptr<const ModelLibrary>& l) {
-      MatchingConfig cfg = loadMatchingConfig(kRoot + "/config/matching.yaml");
-      cfg.viewpoint = kEye;
-      cfg.coarse = coarse;
-      cfg.threads = 1;
-      if (library_search) {  // PCL normals + FLANN fitness, Embree's point query in the polish
-        cfg.scene_search = "kdtree";
-        cfg.closest_point_grid = false;
+      // the parts: the cell's settings; a real model: the defaults scaled to it (cellsight_locate)
+      auto matchers = std::make_shared<std::map<std::string, std::shared_ptr<ModelMatcher>>>();
+      std::shared_ptr<ModelMatcher> parts;
+      for (const std::string& id : l->ids()) {
+        const bool real = g_real.count(id) > 0;
+        MatchingConfig cfg = real ? scaledMatchingConfig(MatchingConfig(), l->model(id).bounds.diagonal().norm(), g_real.at(id).spacing)
+                                  : loadMatchingConfig(kRoot + "/config/matching.yaml");
+        cfg.viewpoint = real ? g_real.at(id).eye : kEye;
+        cfg.coarse = coarse;
+        cfg.threads = 1;
+        if (real) {  // a whole scan, not a cluster
+          cfg.min_coverage = 0;
+          cfg.max_instances = 1;
+        }
+        if (library_search) {  // PCL normals + FLANN fitness, Embree's point query in the polish
+          cfg.scene_search = "kdtree";
+          cfg.closest_point_grid = false;
+        }
+        if (!real && parts) {
+          (*matchers)[id] = parts;
+          continue;
+        }
+        auto m = std::make_shared<ModelMatcher>(l, cfg);
+        if (!real) parts = m;
+        (*matchers)[id] = m;
       }
-      auto m = std::make_shared<ModelMatcher>(l, cfg);
-      m->prepare({"bracket", "housing", "blade", "flanged_shaft", "holder"});
-      return std::function<Eigen::Isometry3d(const Case&)>([m](const Case& c) {
-        const auto d = m->locate({c.cloud}, {c.model});
+      for (const auto& [id, m] : *matchers) m->prepare({id});
+      return std::function<Eigen::Isometry3d(const Case&)>([matchers](const Case& c) {
+        const auto d = matchers->at(c.model)->locate({c.cloud}, {c.model});
         return d.empty() ? Eigen::Isometry3d::Identity() : d[0].pose;
       });
     };
@@ -299,9 +421,10 @@ int main(int argc, char** argv) {
     std::snprintf(tag, sizeof(tag), " [voxel %.1f mm]", t.voxel * 1e3);
     methods.push_back({std::string("PCL SampleConsensusPrerejective + ICP") + tag, [t](const std::shared_ptr<const ModelLibrary>& l) {
                          const auto models = allModels(*l, t);
-                         return std::function<Eigen::Isometry3d(const Case&)>([models, t](const Case& c) {
+                         return std::function<Eigen::Isometry3d(const Case&)>([models, t0 = t](const Case& c) {
+                           const Tuning t = t0.scaled(c.scale);
                            const Model& m = models->at(c.model);
-                           const PreparedScene s = prepare(c.cloud, t);
+                           const PreparedScene s = prepare(c.cloud, t, c.eye);
                            pcl::SampleConsensusPrerejective<PN, PN, pcl::FPFHSignature33> r;
                            r.setInputSource(m.pts);
                            r.setSourceFeatures(m.fpfh);
@@ -322,9 +445,10 @@ int main(int argc, char** argv) {
                        }});
     methods.push_back({std::string("Open3D RANSAC (FPFH) + ICP") + tag, [t](const std::shared_ptr<const ModelLibrary>& l) {
                          const auto models = allModels(*l, t);
-                         return std::function<Eigen::Isometry3d(const Case&)>([models, t](const Case& c) {
+                         return std::function<Eigen::Isometry3d(const Case&)>([models, t0 = t](const Case& c) {
+                           const Tuning t = t0.scaled(c.scale);
                            const Model& m = models->at(c.model);
-                           const PreparedScene s = prepare(c.cloud, t);
+                           const PreparedScene s = prepare(c.cloud, t, c.eye);
                            Open3dRansacOptions o;
                            o.max_correspondence_distance = t.inlier;
                            return pclIcp(m, c.cloud, open3dRansac(m.xyz, m.feats, xyzOf(s), featsOf(s), o), t.inlier);
@@ -333,9 +457,10 @@ int main(int argc, char** argv) {
     // Open3D's FGR throws when too few matches survive its tuple test: a failure (runMethod)
     methods.push_back({std::string("Open3D FGR (FPFH) + ICP") + tag, [t](const std::shared_ptr<const ModelLibrary>& l) {
                          const auto models = allModels(*l, t);
-                         return std::function<Eigen::Isometry3d(const Case&)>([models, t](const Case& c) {
+                         return std::function<Eigen::Isometry3d(const Case&)>([models, t0 = t](const Case& c) {
+                           const Tuning t = t0.scaled(c.scale);
                            const Model& m = models->at(c.model);
-                           const PreparedScene s = prepare(c.cloud, t);
+                           const PreparedScene s = prepare(c.cloud, t, c.eye);
                            FgrOptions o;
                            o.max_correspondence_distance = t.inlier;
                            return pclIcp(m, c.cloud, fastGlobalRegistration(m.xyz, m.feats, xyzOf(s), featsOf(s), o), t.inlier);
@@ -345,15 +470,15 @@ int main(int argc, char** argv) {
   methods.push_back({"OpenCV ppf_match_3d + its ICP", [](const std::shared_ptr<const ModelLibrary>& l) {
                        auto det = std::make_shared<std::map<std::string, std::shared_ptr<cv::ppf_match_3d::PPF3DDetector>>>();
                        auto mats = std::make_shared<std::map<std::string, cv::Mat>>();
-                       for (const std::string id : {"bracket", "housing", "blade", "flanged_shaft", "holder"}) {
-                         // input deduplicated: one point per 2 mm voxel, mesh normals
+                       for (const std::string& id : l->ids()) {
+                         // input deduplicated: one point per voxel (2 mm for the parts), mesh normals
                          auto d = std::make_shared<cv::ppf_match_3d::PPF3DDetector>(0.1, 0.05);
-                         (*mats)[id] = toCvMat(*l->cloud(id, kVoxel));
+                         (*mats)[id] = toCvMat(*l->cloud(id, kVoxel * scaleOf(id)));
                          d->trainModel((*mats)[id]);
                          (*det)[id] = d;
                        }
                        return std::function<Eigen::Isometry3d(const Case&)>([det, mats](const Case& c) {
-                         const PreparedScene s = prepare(c.cloud);
+                         const PreparedScene s = prepare(c.cloud, kDefault.scaled(c.scale), c.eye);
                          ScanCloud sc;
                          for (const auto& p : s.pts->points) {
                            sc.append(p.getVector3fMap(), 0.f);
@@ -373,13 +498,15 @@ int main(int argc, char** argv) {
                        });
                      }});
 
-  json all = json::array();
-  std::printf("| method | success (2 mm / 2°) | threw | median s/scene (successes) | peak RSS MB |\n|---|---|---|---|---|\n");
   const std::string only = argc > 3 ? argv[3] : "";  // run only the methods whose name contains this
+  // every method on a set of cases, each in its own process; then speed against each peer
+  auto runSet = [&](const std::vector<Case>& cases, const std::shared_ptr<const ModelLibrary>& lib, json* comparisons_out) {
+  json all = json::array();
+  std::printf("| method | success | threw | median s/scene (successes) | peak RSS MB |\n|---|---|---|---|---|\n");
   for (const auto& [name, make] : methods) {
     if (!only.empty() && name.find(only) == std::string::npos) continue;
     int fd[2];
-    if (pipe(fd) != 0) return 1;
+    if (pipe(fd) != 0) throw std::runtime_error("pipe() failed");
     const pid_t pid = fork();
     if (pid == 0) {
       close(fd[0]);
@@ -420,7 +547,8 @@ int main(int argc, char** argv) {
   }
   // Speed against each peer: its best tuning (most successes, then fastest), and per case only
   // where both succeed; a ratio is claimed only against a peer that succeeds on >= 90 % of them.
-  json comparisons = json::array();
+  json& comparisons = *comparisons_out;
+  comparisons = json::array();
   const json* ours_r = nullptr;
   for (const auto& r : all)
     if (r["method"] == "cellsight ppf (ours)" && r.contains("cases")) ours_r = &r;
@@ -460,6 +588,36 @@ int main(int argc, char** argv) {
                   claim ? "yes" : "no (peer under 90 % success)");
     }
   }
+  return all;
+  };
+  json all, comparisons, real_all, real_comparisons, real_cases_json = json::array();
+  const std::string set = argc > 4 ? argv[4] : "";
+  if (set.empty() || set == "sim") {
+    std::printf("Simulated single views of the parts (%zu cases, 2 mm / 2°)\n\n", cases.size());
+    all = runSet(cases, lib, &comparisons);
+  }
+  if (set.empty() || set == "real") {
+    auto real_lib = std::make_shared<ModelLibrary>();
+    const std::vector<Case> real = realCases(real_lib.get(), &real_cases_json);
+    if (real.empty()) {
+      std::printf("\nReal cases: ../shared/data/pointclouds not found, skipped\n");
+    } else {
+      std::printf("\nReal cases (%zu: %s)\n\n", real.size(), real_cases_json.dump().c_str());
+      real_all = runSet(real, real_lib, &real_comparisons);
+      std::printf("\n| case | %s |\n", "method: success, fastest s (of 3)");
+      for (size_t k = 0; k < real.size(); ++k) {
+        std::printf("| %s |", real[k].name.c_str());
+        for (const auto& r : real_all) {
+          if (!r.contains("cases")) continue;
+          const json& c = r["cases"][k];
+          std::printf(" %s: %s%s;", r["method"].get<std::string>().c_str(),
+                      c["success"].get<bool>() ? "ok " : (c["threw"].get<bool>() ? "threw" : "wrong"),
+                      c.contains("seconds") ? std::to_string(c["seconds"].get<double>()).c_str() : "");
+        }
+        std::printf("\n");
+      }
+    }
+  }
   // Our model preparation, reported apart from the per-scene times: the first time (prepared
   // and written to the on-disk cache) and every later start (loaded from it), one thread.
   json preparation;
@@ -486,6 +644,9 @@ int main(int argc, char** argv) {
   std::ofstream(out_path) << json({{"scenes", cases.size()},
                                    {"results", all},
                                    {"comparisons", comparisons},
+                                   {"real_cases", real_cases_json},
+                                   {"real_results", real_all},
+                                   {"real_comparisons", real_comparisons},
                                    {"model_preparation_ours", preparation}})
                                  .dump(2)
                           << "\n";
