@@ -418,7 +418,7 @@ int main(int argc, char** argv) {
   for (const double f : {0.75, 1.0, 1.5}) {
     const Tuning t = kDefault.scaled(f);
     char tag[64];
-    std::snprintf(tag, sizeof(tag), " [voxel %.1f mm]", t.voxel * 1e3);
+    std::snprintf(tag, sizeof(tag), " [x%.2g: voxel %.1f mm on the parts]", f, t.voxel * 1e3);
     methods.push_back({std::string("PCL SampleConsensusPrerejective + ICP") + tag, [t](const std::shared_ptr<const ModelLibrary>& l) {
                          const auto models = allModels(*l, t);
                          return std::function<Eigen::Isometry3d(const Case&)>([models, t0 = t](const Case& c) {
