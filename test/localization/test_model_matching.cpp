@@ -223,6 +223,12 @@ TEST(ModelMatching, APartTheCameraSawThroughIsRefused) {
   EXPECT_TRUE(m.locate({view}, {"holder"}, &st, nullptr, &table, &through).empty());
   ASSERT_FALSE(st.rejected.empty());
   EXPECT_GT(st.rejected[0].see_through, 0.3);
+  // broken support points (NaN, one 10 km away) neither crash nor blow up the map: it is
+  // coarsened to at most 16 M cells, and the part is still found
+  auto broken = seen;
+  broken.push_back(Eigen::Vector3f::Constant(NAN));
+  broken.push_back(Eigen::Vector3f(1e4f, 1e4f, 0.f));
+  EXPECT_EQ(m.locate({view}, {"holder"}, nullptr, nullptr, &table, &broken).size(), 1u);
 }
 
 // Two parts touching so closely that clustering keeps them together: neither explains 60 % of
