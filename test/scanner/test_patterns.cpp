@@ -107,7 +107,9 @@ TEST(Patterns, ChessboardCornersWithinATenthOfAPixelAtEverySquareSize) {
       std::printf("  %s %.3f", ref == ChessboardSpec::Refinement::kAdaptive ? "adaptive"
                               : ref == ChessboardSpec::Refinement::kFixed   ? "fixed"
                                                                             : "sb", rms);
-      if (ref == ChessboardSpec::Refinement::kAdaptive) EXPECT_LT(rms, 0.1) << px << " px squares";
+      if (ref == ChessboardSpec::Refinement::kAdaptive) {
+        EXPECT_LT(rms, 0.1) << px << " px squares";
+      }
     }
     std::printf("\n");
   }
