@@ -12,8 +12,14 @@ rm -f "$OUTPUT"
 roslaunch -p "${ROS_MASTER_URI##*:}" cellsight replay.launch bag:="$BAG" output_file:="$OUTPUT" >"$LOG" 2>&1 &
 LAUNCH_PID=$!
 trap 'kill -INT $LAUNCH_PID 2>/dev/null; wait $LAUNCH_PID 2>/dev/null || true' EXIT
+# the EXIT trap only stops roslaunch (its `|| true`: it may be gone already); the result is the
+# finisher's clean exit within 300 s and the cloud it wrote, both checked below
+finished=0
 for _ in $(seq 1200); do
-  grep -q "replay_finisher-[0-9]*\] process has finished cleanly" "$LOG" && break
+  if grep -q "replay_finisher-[0-9]*\] process has finished cleanly" "$LOG"; then
+    finished=1
+    break
+  fi
   if grep -qE "replay_finisher.*has died|replay_finisher: " "$LOG" && grep -q "\[ERROR\].*replay_finisher" "$LOG"; then
     echo "replay: failed, see $LOG" >&2
     grep "replay_finisher" "$LOG" | tail -3 >&2
@@ -22,5 +28,6 @@ for _ in $(seq 1200); do
   kill -0 $LAUNCH_PID 2>/dev/null || { echo "replay: roslaunch ended early, see $LOG" >&2; exit 1; }
   sleep 0.25
 done
+[ "$finished" = 1 ] || { echo "replay: the replay did not finish within 300 s, see $LOG" >&2; exit 1; }
 [ -f "$OUTPUT" ] || { echo "replay: no cloud written, see $LOG" >&2; exit 1; }
 grep "replay_finisher: scan of" "$LOG" | sed 's/.*replay_finisher: /replay: /'
