@@ -19,6 +19,9 @@
 namespace cellsight {
 
 namespace {
+
+/// Spacing of the support points kept for the matcher's free-space test (base x / y), m.
+constexpr double kSupportCell = 0.002;
 using PointT = pcl::PointXYZI;
 
 pcl::PointCloud<PointT>::Ptr voxelise(const pcl::PointCloud<PointT>::Ptr& in, double leaf) {
@@ -95,7 +98,8 @@ ClusteringResult clusterScene(const ScanCloud& scene, const ClusteringConfig& cf
         if (h > cfg.plane_distance) {
           above->push_back(p);
         } else if (h >= -cfg.plane_distance && std::isfinite(p.x) && std::isfinite(p.y)) {
-          const auto ix = static_cast<int64_t>(std::floor(p.x / 0.002)), iy = static_cast<int64_t>(std::floor(p.y / 0.002));
+          const auto ix = static_cast<int64_t>(std::floor(p.x / kSupportCell)),
+                     iy = static_cast<int64_t>(std::floor(p.y / kSupportCell));
           if (cells.insert((static_cast<uint64_t>(ix) << 32) ^ static_cast<uint64_t>(iy & 0xffffffff)).second)
             r.support_points.emplace_back(p.x, p.y, p.z);
         }

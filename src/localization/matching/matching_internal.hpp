@@ -230,16 +230,16 @@ std::vector<Vec3> capPoints(const std::vector<Vec3>& pts, double leaf, size_t ca
 // ---- hypothesis_scoring.cpp
 /// Counts scene points explained by the model under T (model → scene), with early exit when
 /// the first `probe` points already promise less than `floor`.
-/// Poses that lay a model's flat faces onto the cluster's plane (ScenePlane), centroid on
-/// centroid, turned about the normal in steps of 30° from the major axes: the hypotheses for a
-/// part seen by one flat face only, whose point pairs all share one feature that PPF leaves out.
-std::vector<Hypothesis> planarHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, size_t max_faces);
 int scoreHypothesis(const SceneData& s, const std::vector<int>& order, const ModelMatcher::ModelIndex& m,
                     const Eigen::Isometry3f& T, float inlier2, float cos_normal, int probe, double floor_share);
 /// Whether two poses differ by more than dt (m) or 0.2 rad.
 bool distinct(const Eigen::Isometry3f& a, const Eigen::Isometry3f& b, float dt);
 
 // ---- ppf.cpp
+/// Poses that lay a model's flat faces onto the cluster's plane (ScenePlane), centroid on
+/// centroid, turned about the normal in steps of 30° from the major axes: the hypotheses for a
+/// part seen by one flat face only, whose point pairs all share one feature that PPF leaves out.
+std::vector<Hypothesis> planarHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, size_t max_faces);
 /// The point pair feature table of a model cloud with normals (features shared by more than
 /// max_bucket pairs left out).
 PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins, size_t max_bucket);
@@ -286,7 +286,7 @@ float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T
 /// it; `slack` widens both (coarse poses are a few millimetres off).
 bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane,
                 const MatchingConfig& cfg, float slack = 0.f);
-/// The detection passes min_fitness, min_coverage and max_rmse.
+/// The detection passes min_fitness, min_coverage, max_rmse and max_see_through.
 bool accepted(const PartDetection& d, const MatchingConfig& cfg);
 
 }  // namespace matching_detail

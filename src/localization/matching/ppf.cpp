@@ -148,7 +148,6 @@ PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins, size_t max_buck
   return t;
 }
 
-/// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
 std::vector<FacePatch> facePatches(const TriangleMesh& mesh, const PlanarFaces& faces, float min_area) {
   struct Sum {
     double area = 0;
@@ -219,6 +218,7 @@ std::vector<Hypothesis> planarHypotheses(const SceneData& s, const ModelMatcher:
   return out;
 }
 
+/// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
 std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                                       const Eigen::Vector4f* support, int* iterations) {
   std::vector<Hypothesis> votes = ppfVoting(s.ppf, m, cfg.ppf_ref_step);

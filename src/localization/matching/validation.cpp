@@ -21,8 +21,6 @@ double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eig
   return static_cast<double>(n) / s.coarse.size();
 }
 
-/// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
-/// itself) that have a scene point within r_F.
 SupportSeen buildSupportSeen(const std::vector<Vec3>& points, const Eigen::Vector4f& plane, float cell) {
   SupportSeen g;
   const Vec3 n = plane.head<3>();
@@ -54,7 +52,8 @@ SupportSeen buildSupportSeen(const std::vector<Vec3>& points, const Eigen::Vecto
     const int j = std::min(g.nv - 1, static_cast<int>((q.y() - lo.y()) / g.cell));
     hit[static_cast<size_t>(j) * g.nu + i] = 1;
   }
-  // eroded: a cell counts as seen when it and its 8 neighbours are
+  // eroded: a cell counts as seen when it and its 8 neighbours are (a missing cell between
+  // sparse support points erodes its neighbours too: the test then checks less, never more)
   g.seen.assign(hit.size(), 0);
   for (int j = 1; j + 1 < g.nv; ++j) {
     for (int i = 1; i + 1 < g.nu; ++i) {
@@ -76,6 +75,8 @@ bool SupportSeen::seenBehind(const Vec3& eye, const Vec3& p, float min_height) c
   return i >= 0 && j >= 0 && i < nu && j < nv && seen[static_cast<size_t>(j) * nu + i] != 0;
 }
 
+/// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
+/// itself) that have a scene point within r_F.
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
                       const MatchingConfig& cfg, double* see_through) {
   const Eigen::Isometry3f Ti = T.inverse();
