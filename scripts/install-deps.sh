@@ -25,7 +25,7 @@ PACKAGES=(
   rviz
   # core libraries
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libembree-dev libtbb-dev
-  libqrencode-dev libzbar-dev libpcl-dev libpcl-conversions-dev libopen3d-dev
+  libqrencode-dev libzbar-dev libvisp-dev libpcl-dev libpcl-conversions-dev libopen3d-dev
   libcli11-dev gnuplot-nox libassimp-dev liborocos-kdl-dev
   # headless rviz screenshots
   xvfb x11-utils imagemagick libgl1-mesa-dri mesa-utils

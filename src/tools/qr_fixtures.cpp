@@ -1,0 +1,151 @@
+// cellsight_qr_fixtures: the QR fixture chain from files.
+//   detect  one image → decoded codes, their poses, the fixtures and user frames (JSON)
+//   sim     a scene's fixture camera rendered N times → UCS error vs the simulator's truth
+//   decode  a folder of photos with expected texts → byte-exact decode rate (all decoders, zbar alone)
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "cellsight/common/calibration.hpp"
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/common/image_io.hpp"
+#include "cellsight/eval/fixture_eval.hpp"
+#include "cli_args.hpp"
+
+using namespace cellsight;
+using nlohmann::json;
+
+namespace {
+
+// {xyz, quat [x, y, z, w]} as the project's JSON files write poses, and the heading of x
+json ucsJson(const Eigen::Isometry3d& T) {
+  const Eigen::Quaterniond q(T.linear());
+  return {{"xyz", {T.translation().x(), T.translation().y(), T.translation().z()}},
+          {"quat", {q.x(), q.y(), q.z(), q.w()}},
+          {"yaw", std::atan2(T.linear()(1, 0), T.linear()(0, 0))}};
+}
+
+json adjustmentJson(const AdjustmentResult& r) {
+  json codes = json::array();
+  for (const auto& c : r.codes) {
+    json j = {{"payload", c.detection.payload}, {"decoder", c.detection.decoder}, {"status", c.status},
+              {"refined", c.detection.refined}, {"located", c.detection.located}, {"modules", c.detection.modules},
+              {"edge_rms_px", c.detection.edge_rms_px}};
+    json corners = json::array();
+    for (const auto& p : c.detection.corners) corners.push_back({p.x, p.y});
+    j["corners"] = corners;
+    if (c.status == "ok") {
+      j["free_rms_px"] = c.free_pose.rms_px;
+      j["T_base_code"] = ucsJson(c.T_base_code);
+    }
+    codes.push_back(j);
+  }
+  json fixtures = json::array();
+  for (const auto& f : r.fixtures) {
+    fixtures.push_back({{"id", f.id}, {"type", f.type}, {"program", f.program}, {"markers", f.inliers},
+                        {"ucs", ucsJson(f.T_base_ucs)}, {"ucs_free", ucsJson(f.T_base_ucs_free)},
+                        {"fixture", ucsJson(f.T_base_fixture)}, {"rms_px", f.rms_px},
+                        {"sigma_translation_mm", f.sigma_translation * 1000},
+                        {"sigma_yaw_deg", f.sigma_yaw * 180 / M_PI}});
+  }
+  return {{"codes", codes}, {"fixtures", fixtures}, {"messages", r.messages}};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app("The QR fixture chain from files: detection, code poses, user frames, and their accuracy.",
+               "cellsight_qr_fixtures");
+  app.require_subcommand(1);
+  std::string image, camera_file, pose_file, registry_file, scene_file, calibration, folder, json_out;
+  std::string method = "visp";
+  bool free_pose = false;
+  int renders = 100;
+  uint64_t seed = 1;
+
+  CLI::App* det = app.add_subcommand("detect", "one image: codes, poses, fixtures and user frames as JSON");
+  det->add_option("--image", image, "fixture camera image")->required()->check(CLI::ExistingFile);
+  det->add_option("--camera", camera_file, "camera_info YAML of the fixture camera")->required()->check(CLI::ExistingFile);
+  det->add_option("--camera-pose", pose_file, "calibration YAML base_link -> fixture camera optical frame")
+      ->required()->check(CLI::ExistingFile);
+  det->add_option("--registry", registry_file, "fixture registry (config/fixtures.yaml)")->required()->check(CLI::ExistingFile);
+
+  CLI::App* sim = app.add_subcommand("sim", "render a scene's fixture camera N times and compare the user frames with the truth");
+  sim->add_option("--scene", scene_file, "scene YAML")->required()->check(CLI::ExistingFile);
+  sim->add_option("--registry", registry_file, "fixture registry")->required()->check(CLI::ExistingFile);
+  sim->add_option("--calibration", calibration,
+                  "folder with fixture_camera.yaml and fixture_camera_pose.yaml (a calibration of the cell, not its truth)")
+      ->required()->check(CLI::ExistingDirectory);
+  sim->add_option("--renders", renders, "renders (sensor noise redrawn each time)")
+      ->check(cellsight_tools::positiveInt())->capture_default_str();
+  sim->add_option("--seed", seed, "noise seed")->capture_default_str();
+
+  CLI::App* dec = app.add_subcommand("decode", "byte-exact decode rate on photos with <name>.txt beside each");
+  dec->add_option("--images", folder, "folder (searched recursively)")->required()->check(CLI::ExistingDirectory);
+
+  for (CLI::App* s : {det, sim}) {
+    s->add_option("--method", method, "free 6-DoF pose: visp (DEMENTHON then VIRTUAL_VS) | ippe_square")
+        ->check(CLI::IsMember({"visp", "ippe_square"}))->capture_default_str();
+    s->add_flag("--free", free_pose, "report the free 6-DoF pose instead of the table-constrained one");
+  }
+  for (CLI::App* s : {det, sim, dec}) s->add_option("--json", json_out, "also write the JSON here (atomically)");
+  if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
+
+  return cellsight_tools::runTool([&] {
+    FixtureAdjustmentConfig ac;
+    ac.table_constrained = !free_pose;
+    ac.free_method = parseCodePoseMethod(method);
+    json out;
+    if (*det) {
+      const FixtureRegistry reg = loadFixtureRegistry(registry_file);
+      const CameraIntrinsics cam = loadCameraInfoYaml(camera_file);
+      const TransformCalibration pose = loadTransformCalibration(pose_file);
+      const cv::Mat img = readImage(image, cv::IMREAD_GRAYSCALE);
+      if (img.cols != cam.width || img.rows != cam.height) {
+        throw std::runtime_error("image " + image + " is " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
+                                 " but the camera file " + camera_file + " calibrates " + std::to_string(cam.width) +
+                                 "x" + std::to_string(cam.height));
+      }
+      QrDetectorConfig dc;
+      dc.expected_codes = 0;
+      for (const auto& f : reg.fixtures) dc.expected_codes += static_cast<int>(f.codes.size());
+      QrDetector detector(dc);
+      out = adjustmentJson(adjustFixtures(detector.detect(img, &cam), reg, cam, pose.T_parent_child, ac));
+    } else if (*sim) {
+      const Scene scene = loadScene(scene_file);
+      const FixtureRegistry reg = loadFixtureRegistry(registry_file);
+      const CameraIntrinsics cam = loadCameraInfoYaml(calibration + "/fixture_camera.yaml");
+      const TransformCalibration pose = loadTransformCalibration(calibration + "/fixture_camera_pose.yaml");
+      FixtureSimConfig sc;
+      sc.renders = renders;
+      sc.seed = seed;
+      sc.adjustment = ac;
+      const FixtureSimResult r = evaluateFixturesSim(scene, reg, cam, pose.T_parent_child, sc);
+      json list = json::array();
+      for (const auto& f : r.fixtures) {
+        list.push_back({{"payload", f.type}, {"program", f.program}, {"markers", f.markers}, {"found", f.found},
+                        {"t_err_mm", f.t_err_mean * 1000}, {"t_sigma_mm", f.t_err_sigma * 1000},
+                        {"t_max_mm", f.t_err_max * 1000}, {"r_err_deg", f.r_err_mean * 180 / M_PI},
+                        {"r_sigma_deg", f.r_err_sigma * 180 / M_PI}, {"r_max_deg", f.r_err_max * 180 / M_PI},
+                        {"free_t_err_mm", f.free_t_err_mean * 1000}, {"free_t_sigma_mm", f.free_t_err_sigma * 1000},
+                        {"free_r_err_deg", f.free_r_err_mean * 180 / M_PI},
+                        {"free_r_sigma_deg", f.free_r_err_sigma * 180 / M_PI},
+                        {"single_code_free_t_err_mm", f.single_t_err_mean * 1000},
+                        {"single_code_free_r_err_deg", f.single_r_err_mean * 180 / M_PI},
+                        {"reported_sigma_mm", f.sigma_translation_reported * 1000}});
+      }
+      out = {{"renders", r.renders}, {"pose", free_pose ? "free 6-DoF (" + method + ")" : "table-constrained"},
+             {"calibration", calibration}, {"fixtures", list}, {"false_fixtures", r.false_fixtures},
+             {"detect_ms_median", r.detect_ms_median}, {"adjust_ms_median", r.adjust_ms_median}};
+    } else {
+      const DecodeRate r = evaluateDecodeRate(folder);
+      out = {{"images", r.images}, {"decoded", r.decoded}, {"zbar_alone", r.decoded_zbar_only},
+             {"wechat_alone", r.decoded_wechat_only}, {"missed", r.missed}};
+    }
+    const std::string text = out.dump(2) + "\n";
+    std::cout << text;
+    if (!json_out.empty()) writeFileAtomic(json_out, text);
+    return 0;
+  });
+}
