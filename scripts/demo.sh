@@ -87,6 +87,16 @@ while [ ! -f "$OUT/detections_raw.json" ]; do
   fi
   sleep 0.5
 done
+# the QR fixtures: qr_frame_adjustment writes its user frames with every fixture camera image (2 Hz)
+deadline=$(( $(date +%s) + 60 ))
+while [ ! -f "$OUT/fixtures_raw.json" ]; do
+  if [ "$(date +%s)" -gt "$deadline" ] || grep -q "qr_frame_adjustment.*has died" "$OUT/launch.log"; then
+    echo "demo: FAILED: qr_frame_adjustment wrote no fixtures; see $OUT/launch.log" >&2
+    grep -E "qr_frame_adjustment" "$OUT/launch.log" | tail -5 >&2 || echo "demo: (no qr_frame_adjustment line in launch.log)" >&2
+    exit 1
+  fi
+  sleep 0.5
+done
 sleep 3  # let rviz draw the last frame
 screenshot "$OUT/rviz.png"
 # What the 2 MP frames cost between processes (nodelets pass them by pointer inside the manager).
@@ -152,6 +162,11 @@ if [ "$true_loc_rc" -ne 0 ] && [ "$true_loc_rc" -ne 3 ]; then
   echo "demo: FAILED at 'budget_true_cal_locate': $(tail -1 "$OUT/logs/budget_true_cal_locate.log")" >&2
   exit 1
 fi
+# the user frames the node sent vs the truth, and the same chain over 100 noisy renders
+run_step fixtures_compare "$TOOLS/cellsight_qr_fixtures" compare --fixtures "$OUT/fixtures_raw.json" --scene "$SCENE" \
+  --registry config/fixtures.yaml --json "$OUT/fixtures.json"
+run_step fixtures_sim "$TOOLS/cellsight_qr_fixtures" sim --scene "$SCENE" --registry config/fixtures.yaml \
+  --calibration "$CAL" --renders 100 --json "$OUT/fixtures_renders.json"
 t6=$(now)
 
 /usr/bin/python3 - "$OUT" "$t0" "$t1" "$t2" "$t3" "$t4" "$t5" "$t6" "$tc0" "$tc1" <<'PY'
@@ -284,4 +299,11 @@ if [ "$eval_rc" -ne 0 ]; then
   echo "demo: FAILED: the localisation evaluation exited with $eval_rc (3: a part missed or a false detection); see $OUT/detections.json" >&2
   exit 1
 fi
+/usr/bin/python3 -c '
+import json, sys
+for f in json.load(open(sys.argv[1])):
+    print("demo: fixture %s -> %s: UCS %s" % (f["type"], f["program"], f["status"] if f["status"] != "ok" else
+          "%.3f mm / %.3f deg from the truth (free 6-DoF: %.3f mm / %.3f deg)" %
+          (f["t_err_mm"], f["r_err_deg"], f["free_t_err_mm"], f["free_r_err_deg"])))
+' "$OUT/fixtures.json"
 echo "demo: done: $OUT"

@@ -184,23 +184,13 @@ cv::Mat renderChessboardView(const Scene& scene, const CameraConfig& camera, con
   return PlanarViewRenderer(scene, camera).render(T_base_board, board, seed);
 }
 
-CalibrationCaptureFiles writeCalibrationCaptures(const Scene& scene, const std::string& dir,
-                                                 const CalibrationCaptureConfig& c) {
-  if (c.board_cols < 3 || c.board_rows < 3 || !(c.square > 0) || c.intrinsic_views < 3 || c.laser_views < 3)
-    throw std::invalid_argument("calibration captures: board of at least 3x3 corners, square > 0, >= 3 views each");
-  CalibrationCaptureFiles f;
-  f.intrinsics_dir = dir + "/intrinsics";
-  f.pattern_image = dir + "/extrinsics/pattern.png";
-  f.taught = dir + "/extrinsics/taught.yaml";
-  f.laser_obs = dir + "/laser/observations.yaml";
-  f.three_point_obs = dir + "/laser_three_point/observations.yaml";
-  f.board = std::to_string(c.board_cols) + "x" + std::to_string(c.board_rows);
-  f.square = c.square;
-  for (const char* sub : {"/intrinsics", "/extrinsics", "/laser", "/laser_three_point"}) makeDirs(dir + sub);
-
-  const CameraConfig& cam = scene.scanner_camera;  // as built
+// Steps 1 and 2 for one camera: chessboard views for its intrinsics (under intrinsics_dir) and
+// the board lying on the table at pattern_xy with its frame taught by the robot's pointer.
+void writeCameraCaptures(const Scene& scene, const CameraConfig& cam, const CalibrationCaptureConfig& c, uint64_t seed,
+                         const Eigen::Vector2d& pattern_xy, const std::string& intrinsics_dir,
+                         const std::string& pattern_image, const std::string& taught) {
   const RobotErrorModel robot(scene.as_built.robot);
-  std::mt19937_64 rng(c.seed);
+  std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> U(0.0, 1.0);
   const PlanarViewRenderer boards(scene, cam);
 
@@ -220,17 +210,17 @@ CalibrationCaptureFiles writeCalibrationCaptures(const Scene& scene, const std::
     if (!boardInView(cam, T, c, 20)) continue;
     char name[64];
     std::snprintf(name, sizeof(name), "/view_%02d.png", written);
-    writePng(f.intrinsics_dir + name, boards.render(T, c, c.seed * 1000 + written));
+    writePng(intrinsics_dir + name, boards.render(T, c, seed * 1000 + written));
     ++written;
   }
 
   // 2. Camera pose: the board lying on the table (3 mm plate) in the middle of the workspace,
   //    its frame taught with the robot's pointer at three corners.
-  const Eigen::Vector3d ws_centre(scene.workspace.center().x(), scene.workspace.center().y(), scene.table.z + 0.003);
+  const Eigen::Vector3d ws_centre(pattern_xy.x(), pattern_xy.y(), scene.table.z + 0.003);
   const Eigen::Isometry3d T_pattern =
       boardAt(Eigen::AngleAxisd(0.12, Eigen::Vector3d::UnitZ()).toRotationMatrix() * faceUp(), ws_centre, c);
   if (!boardInView(cam, T_pattern, c, 5)) throw std::runtime_error("calibration captures: the board on the table is not in the camera's view");
-  writePng(f.pattern_image, boards.render(T_pattern, c, c.seed * 1000 + 999));
+  writePng(pattern_image, boards.render(T_pattern, c, seed * 1000 + 999));
   std::normal_distribution<double> pointer(0.0, c.pointer_sigma_mm * 1e-3);
   auto teach = [&](const Eigen::Vector3d& corner) {
     Eigen::Isometry3d F = Eigen::Isometry3d::Identity();
@@ -251,10 +241,32 @@ CalibrationCaptureFiles writeCalibrationCaptures(const Scene& scene, const std::
     for (const auto& [key, p] : {std::pair<const char*, Eigen::Vector3d>{"origin", o}, {"on_x", x}, {"in_xy", y}})
       out << YAML::Key << key << YAML::Value << YAML::Flow << YAML::BeginSeq << p.x() << p.y() << p.z() << YAML::EndSeq;
     out << YAML::EndMap;
-    writeFileAtomic(f.taught, std::string("# the pattern's first inner corner, the last corner of its first row, the first "
+    writeFileAtomic(taught, std::string("# the pattern's first inner corner, the last corner of its first row, the first "
                                           "corner of its last row, as the robot's pointer reported them (metres, base frame)\n") +
                                   out.c_str() + "\n");
   }
+
+}
+
+CalibrationCaptureFiles writeCalibrationCaptures(const Scene& scene, const std::string& dir,
+                                                 const CalibrationCaptureConfig& c) {
+  if (c.board_cols < 3 || c.board_rows < 3 || !(c.square > 0) || c.intrinsic_views < 3 || c.laser_views < 3)
+    throw std::invalid_argument("calibration captures: board of at least 3x3 corners, square > 0, >= 3 views each");
+  CalibrationCaptureFiles f;
+  f.intrinsics_dir = dir + "/intrinsics";
+  f.pattern_image = dir + "/extrinsics/pattern.png";
+  f.taught = dir + "/extrinsics/taught.yaml";
+  f.laser_obs = dir + "/laser/observations.yaml";
+  f.three_point_obs = dir + "/laser_three_point/observations.yaml";
+  f.board = std::to_string(c.board_cols) + "x" + std::to_string(c.board_rows);
+  f.square = c.square;
+  for (const char* sub : {"/intrinsics", "/extrinsics", "/laser", "/laser_three_point"}) makeDirs(dir + sub);
+
+  writeCameraCaptures(scene, scene.scanner_camera, c, c.seed,
+                      Eigen::Vector2d(scene.workspace.center().x(), scene.workspace.center().y()), f.intrinsics_dir,
+                      f.pattern_image, f.taught);
+  const RobotErrorModel robot(scene.as_built.robot);
+  const Eigen::Vector3d ws_centre(scene.workspace.center().x(), scene.workspace.center().y(), scene.table.z + 0.003);
 
   // 3. Light sheet, least squares: the bare table seen from poses at several heights and tilts.
   Scene bare = scene;
@@ -300,6 +312,24 @@ CalibrationCaptureFiles writeCalibrationCaptures(const Scene& scene, const std::
                                         Eigen::Vector3d(ws_centre.x(), ws_centre.y(), scene.table.z + hb), scene.table.z + 0.26);
     writePng(dir + "/laser_three_point/line.png", r.render(robot.actual(F, 200000), c.seed * 7777 + 999));
     emitObservations(f.three_point_obs, {"line.png"}, {F}, scene.table.z, scene.table.z + hb);
+  }
+  // 5. The fixture camera (scenes with QR fixtures): its own chessboard views, and the board on
+  //    the table under the camera's optical axis, taught like the scanner camera's.
+  if (!scene.fixtures.empty()) {
+    f.fixture_intrinsics_dir = dir + "/fixture_intrinsics";
+    f.fixture_pattern_image = dir + "/fixture_extrinsics/pattern.png";
+    f.fixture_taught = dir + "/fixture_extrinsics/taught.yaml";
+    makeDirs(f.fixture_intrinsics_dir);
+    makeDirs(dir + "/fixture_extrinsics");
+    const CameraConfig& fc = scene.fixture_camera;
+    const Eigen::Vector3d axis = fc.T_base_camera.linear().col(2), C = fc.T_base_camera.translation();
+    if (axis.z() > -0.2) throw std::runtime_error("calibration captures: the fixture camera does not look down at the table");
+    const Eigen::Vector3d on_table = C + axis * ((scene.table.z - C.z()) / axis.z());
+    CalibrationCaptureConfig big = c;  // the fixture camera sees a wider field: a larger board
+    big.square = c.fixture_square;
+    f.fixture_square = c.fixture_square;
+    writeCameraCaptures(scene, fc, big, c.seed * 31 + 17, on_table.head<2>(), f.fixture_intrinsics_dir,
+                        f.fixture_pattern_image, f.fixture_taught);
   }
   return f;
 }

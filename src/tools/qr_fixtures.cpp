@@ -12,6 +12,7 @@
 #include "cellsight/common/image_io.hpp"
 #include "cellsight/eval/fixture_eval.hpp"
 #include "cli_args.hpp"
+#include "json_pose.hpp"
 
 using namespace cellsight;
 using nlohmann::json;
@@ -81,6 +82,12 @@ int main(int argc, char** argv) {
       ->check(cellsight_tools::positiveInt())->capture_default_str();
   sim->add_option("--seed", seed, "noise seed")->capture_default_str();
 
+  std::string node_file;
+  CLI::App* cmp = app.add_subcommand("compare", "the user frames qr_frame_adjustment wrote (~output_file) vs the scene's truth");
+  cmp->add_option("--fixtures", node_file, "the node's JSON (e.g. out/demo/fixtures_raw.json)")->required()->check(CLI::ExistingFile);
+  cmp->add_option("--scene", scene_file, "scene YAML")->required()->check(CLI::ExistingFile);
+  cmp->add_option("--registry", registry_file, "fixture registry")->required()->check(CLI::ExistingFile);
+
   CLI::App* dec = app.add_subcommand("decode", "byte-exact decode rate on photos with <name>.txt beside each");
   dec->add_option("--images", folder, "folder (searched recursively)")->required()->check(CLI::ExistingDirectory);
 
@@ -89,7 +96,7 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"visp", "ippe_square"}))->capture_default_str();
     s->add_flag("--free", free_pose, "report the free 6-DoF pose instead of the table-constrained one");
   }
-  for (CLI::App* s : {det, sim, dec}) s->add_option("--json", json_out, "also write the JSON here (atomically)");
+  for (CLI::App* s : {det, sim, dec, cmp}) s->add_option("--json", json_out, "also write the JSON here (atomically)");
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
 
   return cellsight_tools::runTool([&] {
@@ -138,6 +145,36 @@ int main(int argc, char** argv) {
       out = {{"renders", r.renders}, {"pose", free_pose ? "free 6-DoF (" + method + ")" : "table-constrained"},
              {"calibration", calibration}, {"fixtures", list}, {"false_fixtures", r.false_fixtures},
              {"detect_ms_median", r.detect_ms_median}, {"adjust_ms_median", r.adjust_ms_median}};
+    } else if (*cmp) {
+      const Scene scene = loadScene(scene_file);
+      const FixtureRegistry reg = loadFixtureRegistry(registry_file);
+      std::ifstream in(node_file);
+      const json node = json::parse(in);
+      json list = json::array();
+      int missing = 0;
+      for (const FixtureTruth& t : fixtureTruth(scene, reg)) {
+        json row = {{"payload", t.payloads.front()}, {"payloads", t.payloads}, {"type", t.type}, {"program", t.program}};
+        const json* found = nullptr;
+        for (const auto& f : node.at("fixtures")) {
+          if (f.at("id") == t.type) found = &f;
+        }
+        if (!found) {
+          row["status"] = "not found";
+          ++missing;
+        } else {
+          const auto [dt, dr] = poseDifference(cellsight_tools::poseFromJson(found->at("ucs")), t.T_base_ucs);
+          const auto [fdt, fdr] = poseDifference(cellsight_tools::poseFromJson(found->at("ucs_free")), t.T_base_ucs);
+          row["status"] = found->at("stale").get<bool>() ? "stale" : "ok";
+          row["markers"] = found->at("markers");
+          row["t_err_mm"] = dt * 1000;
+          row["r_err_deg"] = dr * 180 / M_PI;
+          row["free_t_err_mm"] = fdt * 1000;
+          row["free_r_err_deg"] = fdr * 180 / M_PI;
+        }
+        list.push_back(row);
+      }
+      out = list;
+      if (missing) std::cerr << "compare: " << missing << " fixture(s) of the scene not reported by the node\n";
     } else {
       const DecodeRate r = evaluateDecodeRate(folder);
       out = {{"images", r.images}, {"decoded", r.decoded}, {"zbar_alone", r.decoded_zbar_only},

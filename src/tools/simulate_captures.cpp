@@ -37,6 +37,10 @@ int main(int argc, char** argv) {
                                  {"taught", f.taught},
                                  {"laser_observations", f.laser_obs},
                                  {"three_point_observations", f.three_point_obs},
+                                 {"fixture_intrinsics_images", f.fixture_intrinsics_dir},
+                                 {"fixture_pattern_image", f.fixture_pattern_image},
+                                 {"fixture_taught", f.fixture_taught},
+                                 {"fixture_square", f.fixture_square},
                                  {"board", f.board},
                                  {"square", f.square},
                                  {"cell", scene.as_built.perfect ? "perfect" : "as built"}})

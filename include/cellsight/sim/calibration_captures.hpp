@@ -17,6 +17,7 @@ namespace cellsight {
 struct CalibrationCaptureConfig {
   int board_cols = 9, board_rows = 6;  ///< inner corners per row, per column
   double square = 0.025;               ///< metres
+  double fixture_square = 0.05;        ///< the fixture camera's board (same corner count), metres
   int intrinsic_views = 15;
   int laser_views = 12;
   double tcp_length = 0.15;            ///< pointer tip along the flange z axis, metres
@@ -39,6 +40,10 @@ struct CalibrationCaptureFiles {
   std::string taught;           ///< extrinsics/taught.yaml {origin, on_x, in_xy}
   std::string laser_obs;        ///< laser/observations.yaml (least squares)
   std::string three_point_obs;  ///< laser_three_point/observations.yaml
+  std::string fixture_intrinsics_dir;  ///< fixture camera, when the scene has fixtures (else empty)
+  std::string fixture_pattern_image;
+  std::string fixture_taught;
+  double fixture_square = 0;
   std::string board;            ///< "9x6"
   double square = 0;
 };
