@@ -16,5 +16,9 @@ echo "== bench_mesh: own PLY/STL readers vs assimp on the same files (one core)"
 taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_mesh" --benchmark_repetitions=3 \
   --benchmark_report_aggregates_only=true \
   --benchmark_out="$CELLSIGHT_BUILD/bench/mesh.json" --benchmark_out_format=json
+echo "== bench_fixtures: QR decoding + poses of one fixture-camera frame vs zbar and wechat_qrcode alone (one core)"
+taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_fixtures" --benchmark_repetitions=3 \
+  --benchmark_report_aggregates_only=true \
+  --benchmark_out="$CELLSIGHT_BUILD/bench/fixtures.json" --benchmark_out_format=json
 echo "== bench_localization: ours vs PCL, Open3D, OpenCV on the same single-view clouds (one thread each)"
 taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_localization" "$CELLSIGHT_BUILD/bench/localization.json" 8

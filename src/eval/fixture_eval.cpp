@@ -8,9 +8,12 @@
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <set>
+#include <random>
 #include <sstream>
+#include <opencv2/calib3d.hpp>
 
 #include "cellsight/common/errors.hpp"
+#include "cellsight/sim/calibration_captures.hpp"
 #include "cellsight/sim/renderer.hpp"
 
 namespace cellsight {
@@ -93,8 +96,14 @@ FixtureSimResult evaluateFixturesSim(const Scene& scene, const FixtureRegistry& 
     const auto t1 = clock::now();
     const AdjustmentResult adj = adjustFixtures(detections, registry, camera, T_base_camera, config.adjustment);
     const auto t2 = clock::now();
+    for (const auto& m : adj.messages) ++result.messages[m];
+    for (const auto& d : detections) ++result.decoders[d.decoder];
     detect_ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
     adjust_ms.push_back(std::chrono::duration<double, std::milli>(t2 - t1).count());
+    if (!config.dump_misses.empty() && adj.fixtures.size() < truth.size()) {
+      std::filesystem::create_directories(config.dump_misses);
+      cv::imwrite(config.dump_misses + "/render_" + std::to_string(k) + ".png", image);
+    }
     for (const FixtureInstance& inst : adj.fixtures) {
       const auto it = std::find_if(truth.begin(), truth.end(), [&](const FixtureTruth& t) { return t.type == inst.type; });
       if (it == truth.end() || inst.id != inst.type) {
@@ -185,6 +194,131 @@ DecodeRate evaluateDecodeRate(const std::string& folder, const QrDetectorConfig&
     if (!all) rate.missed.push_back(fs::relative(img, folder).string());
   }
   return rate;
+}
+
+}  // namespace cellsight
+
+namespace cellsight {
+namespace {
+
+std::vector<Eigen::Vector3d> boardPoints(int cols, int rows, double square) {
+  std::vector<Eigen::Vector3d> p;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) p.emplace_back(c * square, r * square, 0.0);
+  }
+  return p;
+}
+
+// the point of the table under the camera's optical axis
+Eigen::Vector3d tableUnderCamera(const Scene& scene) {
+  const Eigen::Isometry3d& T = scene.fixture_camera.T_base_camera;
+  const Eigen::Vector3d axis = T.linear().col(2), C = T.translation();
+  return C + axis * ((scene.table.z - C.z()) / axis.z());
+}
+
+}  // namespace
+
+HandEyeInput simulateHandEyeViews(const Scene& scene, const HandEyeSweepConfig& c, uint64_t seed,
+                                  Eigen::Isometry3d* true_X, Eigen::Isometry3d* true_Y) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> N(0.0, 1.0);
+  const CameraConfig& cam = scene.fixture_camera;
+  HandEyeInput in;
+  in.camera = cam.intrinsics;
+  in.target_points = boardPoints(9, 6, 0.03);
+  // the board on top of the tool, printed side up (its z into the board = the flange's z, down),
+  // centred over the flange, 60 mm behind the flange face
+  Eigen::Isometry3d Y = Eigen::Isometry3d::Identity();
+  Y.translation() = Eigen::Vector3d(-0.12, -0.075, -0.06);
+  const Eigen::Isometry3d X = cam.T_base_camera;
+  const std::vector<Eigen::Isometry3d> flanges =
+      handEyeFlangePoses(scene, cam, Y, in.target_points, c.views, seed * 31 + 1);
+  in.axes_reference = 0;
+  in.axes_moves = {1, 2, 3, 4, 5, 6};
+  const std::vector<cv::Point3d> obj = [&] {
+    std::vector<cv::Point3d> o;
+    for (const auto& p : in.target_points) o.emplace_back(p.x(), p.y(), p.z());
+    return o;
+  }();
+  const cv::Matx33d K(cam.intrinsics.fx, 0, cam.intrinsics.cx, 0, cam.intrinsics.fy, cam.intrinsics.cy, 0, 0, 1);
+  const std::vector<double> dist(cam.intrinsics.dist.begin(), cam.intrinsics.dist.end());
+  for (const auto& F : flanges) {
+    HandEyeView v;
+    const Eigen::Isometry3d T = X.inverse() * F * Y;
+    std::vector<cv::Point2d> img;
+    for (const auto& p : in.target_points) {
+      const Eigen::Vector2d uv = cam.intrinsics.project(T * p);
+      img.emplace_back(uv.x() + c.corner_sigma_px * N(rng), uv.y() + c.corner_sigma_px * N(rng));
+    }
+    cv::Vec3d rvec, tvec;
+    cv::solvePnP(obj, img, K, dist, rvec, tvec, false, cv::SOLVEPNP_ITERATIVE);
+    cv::Matx33d R;
+    cv::Rodrigues(rvec, R);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) v.T_camera_target.linear()(i, j) = R(i, j);
+      v.T_camera_target.translation()(i) = tvec[i];
+    }
+    v.corners = img;
+    Eigen::Isometry3d reported = F;
+    reported.translation() += c.repeatability_mm * 1e-3 * Eigen::Vector3d(N(rng), N(rng), N(rng));
+    const Eigen::Vector3d w = c.flange_rotation_deg * M_PI / 180 * Eigen::Vector3d(N(rng), N(rng), N(rng));
+    if (w.norm() > 0) reported.linear() = F.linear() * Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+    v.T_base_flange = reported;
+    in.views.push_back(std::move(v));
+  }
+  in.touched_origin = (flanges[0] * Y).translation() + (c.pointer_sigma_mm + c.repeatability_mm) * 1e-3 *
+                                                          Eigen::Vector3d(N(rng), N(rng), N(rng));
+  if (true_X) *true_X = X;
+  if (true_Y) *true_Y = Y;
+  return in;
+}
+
+std::vector<HandEyeSweepRow> handEyeSweep(const Scene& scene, const HandEyeSweepConfig& base) {
+  const std::vector<std::pair<std::string, std::vector<double>>> factors = {
+      {"corner_sigma_px", {0.0, 0.05, 0.1, 0.2, 0.5, 1.0}},
+      {"repeatability_mm", {0.0, 0.01, 0.02, 0.05, 0.1, 0.2}},
+      {"flange_rotation_deg", {0.0, 0.001, 0.002, 0.005, 0.01, 0.02}}};
+  const Eigen::Vector3d p = tableUnderCamera(scene);
+  std::vector<HandEyeSweepRow> rows;
+  for (const auto& [factor, values] : factors) {
+    for (double value : values) {
+      HandEyeSweepConfig c = base;
+      if (factor == "corner_sigma_px") c.corner_sigma_px = value;
+      if (factor == "repeatability_mm") c.repeatability_mm = value;
+      if (factor == "flange_rotation_deg") c.flange_rotation_deg = value;
+      HandEyeSweepRow row;
+      row.factor = factor;
+      row.value = value;
+      for (HandEyeMethod m : allHandEyeMethods()) row.methods.push_back(handEyeMethodName(m));
+      row.t_err_mm.assign(row.methods.size(), 0.0);
+      row.r_err_deg.assign(row.methods.size(), 0.0);
+      row.failures.assign(row.methods.size(), 0);
+      std::vector<int> ok(row.methods.size(), 0);
+      for (int t = 0; t < c.trials; ++t) {
+        Eigen::Isometry3d X, Y;
+        const HandEyeInput in = simulateHandEyeViews(scene, c, c.seed * 7919 + static_cast<uint64_t>(t), &X, &Y);
+        const auto methods = allHandEyeMethods();
+        for (size_t k = 0; k < methods.size(); ++k) {
+          const HandEyeResult r = calibrateEyeToHand(in, methods[k]);
+          if (!r.ok) {
+            ++row.failures[k];
+            continue;
+          }
+          // where the calibrated camera puts a table point it sees, vs where it is
+          const Eigen::Vector3d q = r.T_base_camera * (X.inverse() * p);
+          row.t_err_mm[k] += (q - p).norm() * 1000;
+          row.r_err_deg[k] += poseDifference(r.T_base_camera, X).second * 180 / M_PI;
+          ++ok[k];
+        }
+      }
+      for (size_t k = 0; k < row.methods.size(); ++k) {
+        row.t_err_mm[k] = ok[k] ? row.t_err_mm[k] / ok[k] : std::nan("");
+        row.r_err_deg[k] = ok[k] ? row.r_err_deg[k] / ok[k] : std::nan("");
+      }
+      rows.push_back(std::move(row));
+    }
+  }
+  return rows;
 }
 
 }  // namespace cellsight

@@ -248,6 +248,53 @@ void writeCameraCaptures(const Scene& scene, const CameraConfig& cam, const Cali
 
 }
 
+std::vector<Eigen::Isometry3d> handEyeFlangePoses(const Scene& scene, const CameraConfig& cam,
+                                                  const Eigen::Isometry3d& Y, const std::vector<Eigen::Vector3d>& points,
+                                                  int count, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const Eigen::Vector3d axis = cam.T_base_camera.linear().col(2), C = cam.T_base_camera.translation();
+  if (axis.z() > -0.2) throw std::runtime_error("hand-eye poses: the camera does not look down at the table");
+  const Eigen::Vector3d centre = C + axis * ((scene.table.z - C.z()) / axis.z());
+  Eigen::Matrix3d down;  // flange z down, x along base x
+  down << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  std::vector<Eigen::Isometry3d> flanges;
+  Eigen::Isometry3d ref = Eigen::Isometry3d::Identity();
+  ref.linear() = down;
+  ref.translation() = centre + Eigen::Vector3d(0, 0, 0.25);
+  flanges.push_back(ref);
+  for (int a = 0; a < 3; ++a) {
+    for (double s : {0.05, -0.05}) {
+      Eigen::Isometry3d F = ref;
+      F.translation()(a) += s;
+      flanges.push_back(F);
+    }
+  }
+  const Eigen::Isometry3d Xi = cam.T_base_camera.inverse();
+  for (int attempt = 0; static_cast<int>(flanges.size()) < count; ++attempt) {
+    if (attempt > 100000) throw std::runtime_error("hand-eye poses: cannot place the target in the camera's view");
+    const double tilt = 25.0 * M_PI / 180 * U(rng), az = 2 * M_PI * U(rng), yaw = (U(rng) - 0.5) * M_PI / 2;
+    Eigen::Isometry3d F = Eigen::Isometry3d::Identity();
+    F.linear() = Eigen::AngleAxisd(tilt, Eigen::Vector3d(std::cos(az), std::sin(az), 0)).toRotationMatrix() *
+                 Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() * down;
+    F.translation() = centre + Eigen::Vector3d((U(rng) - 0.5) * 0.4, (U(rng) - 0.5) * 0.3, 0.1 + 0.25 * U(rng));
+    const Eigen::Isometry3d T = Xi * F * Y;
+    bool inside = T.linear().col(2).z() > 0.5;  // the target faces the camera
+    for (const auto& p : points) {
+      if (!inside) break;
+      const Eigen::Vector3d q = T * p;
+      if (q.z() < 0.1) {
+        inside = false;
+        break;
+      }
+      const Eigen::Vector2d uv = cam.intrinsics.project(q);
+      inside = uv.x() > 30 && uv.y() > 30 && uv.x() < cam.intrinsics.width - 30 && uv.y() < cam.intrinsics.height - 30;
+    }
+    if (inside) flanges.push_back(F);
+  }
+  return flanges;
+}
+
 CalibrationCaptureFiles writeCalibrationCaptures(const Scene& scene, const std::string& dir,
                                                  const CalibrationCaptureConfig& c) {
   if (c.board_cols < 3 || c.board_rows < 3 || !(c.square > 0) || c.intrinsic_views < 3 || c.laser_views < 3)
@@ -330,6 +377,59 @@ CalibrationCaptureFiles writeCalibrationCaptures(const Scene& scene, const std::
     f.fixture_square = c.fixture_square;
     writeCameraCaptures(scene, fc, big, c.seed * 31 + 17, on_table.head<2>(), f.fixture_intrinsics_dir,
                         f.fixture_pattern_image, f.fixture_taught);
+    // 6. Fixture camera to robot (eye-to-hand): a board on top of the tool, printed side up,
+    //    carried through the camera's view; the flange poses as the robot reported them, and the
+    //    pointer's touch of the board's origin in the first (reference) pose for the axes method
+    f.hand_eye_dir = dir + "/hand_eye";
+    f.hand_eye_square = c.hand_eye_square;
+    makeDirs(f.hand_eye_dir);
+    CalibrationCaptureConfig tool = c;
+    tool.square = c.hand_eye_square;
+    Eigen::Isometry3d Y = Eigen::Isometry3d::Identity();  // board origin: first inner corner
+    Y.translation() = Eigen::Vector3d(-(c.board_cols - 1) * tool.square / 2, -(c.board_rows - 1) * tool.square / 2, -0.06);
+    std::vector<Eigen::Vector3d> corners;
+    for (int r = 0; r < c.board_rows; ++r)
+      for (int k = 0; k < c.board_cols; ++k) corners.emplace_back(k * tool.square, r * tool.square, 0.0);
+    const auto flanges = handEyeFlangePoses(scene, fc, Y, corners, std::max(8, c.hand_eye_views), c.seed * 53 + 5);
+    const PlanarViewRenderer tool_boards(scene, fc);
+    YAML::Emitter poses;
+    poses.SetDoublePrecision(17);
+    poses << YAML::BeginMap << YAML::Key << "axes_reference" << YAML::Value << 0;
+    poses << YAML::Key << "axes_moves" << YAML::Value << YAML::Flow << YAML::BeginSeq << 1 << 2 << 3 << 4 << 5 << 6
+          << YAML::EndSeq;
+    poses << YAML::Key << "views" << YAML::Value << YAML::BeginSeq;
+    Eigen::Isometry3d reference_actual = Eigen::Isometry3d::Identity();
+    for (size_t k = 0; k < flanges.size(); ++k) {
+      const Eigen::Isometry3d actual = robot.actual(flanges[k], 300000 + k);
+      if (k == 0) reference_actual = actual;
+      char name[64];
+      std::snprintf(name, sizeof(name), "view_%02zu.png", k);
+      writePng(f.hand_eye_dir + "/" + name, tool_boards.render(actual * Y, tool, c.seed * 4241 + k));
+      poses << YAML::BeginMap << YAML::Key << "image" << YAML::Value << name << YAML::Key << "flange" << YAML::Value;
+      emitPose(poses, flanges[k]);
+      poses << YAML::EndMap;
+    }
+    poses << YAML::EndSeq << YAML::EndMap;
+    writeFileAtomic(f.hand_eye_dir + "/flange_poses.yaml",
+                    std::string("# fixture camera to robot: flange poses as the robot reported them (metres, base frame), "
+                                "one per image; views 1-6 are pure moves along the base axes from view 0\n") +
+                        poses.c_str() + "\n");
+    // the pointer on the board's origin with the board held in the reference pose
+    std::normal_distribution<double> pointer(0.0, c.pointer_sigma_mm * 1e-3);
+    const Eigen::Vector3d origin = (reference_actual * Y).translation();
+    Eigen::Isometry3d P = Eigen::Isometry3d::Identity();
+    P.linear() = scene.robot.home.linear();
+    const Eigen::Vector3d tcp(0, 0, c.tcp_length);
+    P.translation() = origin - P.linear() * tcp;
+    std::mt19937_64 touch_rng(c.seed * 97 + 3);
+    const Eigen::Vector3d touched = robot.reported(P) * tcp + Eigen::Vector3d(pointer(touch_rng), pointer(touch_rng), pointer(touch_rng));
+    YAML::Emitter t;
+    t.SetDoublePrecision(17);
+    t << YAML::BeginMap << YAML::Key << "origin" << YAML::Value << YAML::Flow << YAML::BeginSeq << touched.x() << touched.y()
+      << touched.z() << YAML::EndSeq << YAML::EndMap;
+    writeFileAtomic(f.hand_eye_dir + "/touched.yaml",
+                    std::string("# the board's first inner corner in view 0, touched with the robot's pointer (metres, base frame)\n") +
+                        t.c_str() + "\n");
   }
   return f;
 }

@@ -13,6 +13,11 @@
 //               [--method lsq|three_point] [--flange flange] [--child laser] --out laser.yaml
 //               obs.yaml: {observations: [{image: f.png, flange_pose: {xyz, rpy|quat}, plane_z: 0,
 //               block_z: 0.02}, ...]} (image paths relative to obs.yaml)
+//   hand_eye    --camera camera.yaml --poses flange_poses.yaml --board 9x6 --square 0.03
+//               [--touched touched.yaml] [--method refined|axes|tsai|park|horaud|andreff|daniilidis|visp]
+//               [--parent base_link] [--child scanner_camera_optical] --out pose.yaml
+//               a stationary camera's pose from views of a board the robot carries; every method
+//               is run and reported, the chosen one written
 // Bad or unknown options are reported by CLI11 (non-zero exit); failures at run time print
 // "error: ..." and exit 1.
 #include <algorithm>
@@ -20,12 +25,14 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/calib3d.hpp>
 
 #include "cellsight/scanner/calibrate.hpp"
 #include "cellsight/common/calibration.hpp"
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/common/image_io.hpp"
 #include "cellsight/common/yaml_reader.hpp"
+#include "cellsight/fixtures/hand_eye.hpp"
 #include "cli_args.hpp"
 
 using namespace cellsight;
@@ -40,6 +47,7 @@ struct Options {
   bool fix_aspect = false, drop_high_rms = false;
   std::string camera, image, taught, parent = "base_link", child_camera = "scanner_camera_optical";
   std::string camera_pose, observations, method = "lsq", flange = "flange", child_laser = "laser";
+  std::string poses, touched, hand_eye_method = "refined";
 };
 
 /// "9x6": inner corners per row and column, both > 0.
@@ -202,6 +210,102 @@ int laser(const Options& o) {
   return 0;
 }
 
+// A stationary camera to the robot (eye-to-hand) from views of a board carried by the robot.
+int handEye(const Options& o) {
+  const CameraIntrinsics cam = loadCameraInfoYaml(o.camera);
+  YamlMap m(loadYamlFile(o.poses), o.poses);
+  HandEyeInput in;
+  in.camera = cam;
+  const int axes_reference = m.getInt("axes_reference", -1);
+  std::vector<int> axes_moves;
+  if (m.has("axes_moves")) {
+    for (const auto& n : m.raw("axes_moves")) axes_moves.push_back(n.as<int>());
+  }
+  const ChessboardSpec b = board(o);
+  const cv::Matx33d K(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
+  const std::vector<double> dist(cam.dist.begin(), cam.dist.end());
+  std::vector<std::string> missed;
+  std::vector<int> index_of;  // file view → input view, -1 when the board was not found
+  size_t expected_points = 0;
+  for (const YamlMap& v : m.getMapList("views")) {
+    const std::string image = resolveRelative(o.poses, v.getString("image"));
+    const Eigen::Isometry3d F = v.getPose("flange");
+    v.finish();
+    PatternView pv;
+    const cv::Mat grey = readImage(image, cv::IMREAD_GRAYSCALE);
+    if (grey.cols != cam.width || grey.rows != cam.height) {
+      throw std::runtime_error(image + " is " + std::to_string(grey.cols) + "x" + std::to_string(grey.rows) +
+                               " but " + o.camera + " calibrates " + std::to_string(cam.width) + "x" + std::to_string(cam.height));
+    }
+    if (!detectPattern(grey, b, pv) || (expected_points && pv.image.size() != expected_points)) {
+      missed.push_back(image);
+      index_of.push_back(-1);
+      continue;
+    }
+    expected_points = pv.image.size();
+    if (in.target_points.empty()) {
+      for (const auto& p : pv.object) in.target_points.emplace_back(p.x, p.y, p.z);
+    }
+    cv::Vec3d rvec, tvec;
+    cv::solvePnP(pv.object, pv.image, K, dist, rvec, tvec, false, cv::SOLVEPNP_ITERATIVE);
+    cv::Matx33d R;
+    cv::Rodrigues(rvec, R);
+    HandEyeView hv;
+    hv.T_base_flange = F;
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) hv.T_camera_target.linear()(i, j) = R(i, j);
+      hv.T_camera_target.translation()(i) = tvec[i];
+    }
+    for (const auto& p : pv.image) hv.corners.emplace_back(p.x, p.y);
+    index_of.push_back(static_cast<int>(in.views.size()));
+    in.views.push_back(std::move(hv));
+  }
+  m.finish();
+  auto mapped = [&](int k) { return k >= 0 && k < static_cast<int>(index_of.size()) ? index_of[static_cast<size_t>(k)] : -1; };
+  in.axes_reference = mapped(axes_reference);
+  for (int k : axes_moves) {
+    if (mapped(k) >= 0) in.axes_moves.push_back(mapped(k));
+  }
+  if (!o.touched.empty()) {
+    YamlMap t(loadYamlFile(o.touched), o.touched);
+    in.touched_origin = t.getVector3("origin");
+    t.finish();
+  }
+  const HandEyeMethod chosen = parseHandEyeMethod(o.hand_eye_method);
+  nlohmann::json methods = nlohmann::json::object();
+  HandEyeResult result;
+  for (HandEyeMethod method : allHandEyeMethods()) {
+    if (method == HandEyeMethod::kAxes && (in.axes_reference < 0 || o.touched.empty())) continue;
+    const HandEyeResult r = calibrateEyeToHand(in, method);
+    nlohmann::json j = {{"ok", r.ok}};
+    if (r.ok) {
+      const Eigen::Vector3d t = r.T_base_camera.translation();
+      const Eigen::Quaterniond q(r.T_base_camera.linear());
+      j.update({{"camera_xyz", {t.x(), t.y(), t.z()}}, {"camera_quat", {q.x(), q.y(), q.z(), q.w()}},
+                {"residual_mm", r.residual_translation * 1000}, {"residual_deg", r.residual_rotation * 180 / M_PI}});
+      if (method == HandEyeMethod::kRefined) j["reprojection_rms_px"] = r.reprojection_rms_px;
+    } else {
+      j["error"] = r.error;
+    }
+    methods[handEyeMethodName(method)] = j;
+    if (method == chosen) result = r;
+  }
+  if (!result.ok) {
+    throw std::runtime_error("hand-eye calibration (" + o.hand_eye_method + ") failed: " +
+                             (result.error.empty() ? "method not run (the axes method needs --touched and axes views)" : result.error));
+  }
+  saveTransform(o.out, o.parent, o.child_camera, result.T_base_camera,
+                chosen == HandEyeMethod::kRefined ? result.reprojection_rms_px : result.residual_translation,
+                "eye-to-hand calibration, " + o.hand_eye_method + ", " + std::to_string(in.views.size()) + " views (residual: " +
+                    (chosen == HandEyeMethod::kRefined ? "reprojection RMS px" : "m") + ")");
+  for (const auto& mm : missed) std::cerr << "warning: no complete board in " << mm << " (view left out)\n";
+  std::cout << nlohmann::json({{"output", o.out}, {"method", o.hand_eye_method}, {"views", in.views.size()},
+                               {"missed", missed}, {"methods", methods}})
+                   .dump(2)
+            << "\n";
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -277,11 +381,31 @@ int main(int argc, char** argv) {
   la->add_option("--child", o.child_laser, "child (laser) frame")->capture_default_str();
   la->add_option("--out", o.out, "transform calibration YAML to write")->required();
 
+  CLI::App* he = app.add_subcommand(
+      "hand_eye", "a stationary camera's pose in the robot base from views of a board the robot carries (eye-to-hand)");
+  he->add_option("--camera", o.camera, "camera intrinsics YAML")->required()->check(CLI::ExistingFile);
+  he->add_option("--poses", o.poses,
+                 "flange_poses.yaml: {views: [{image: view_00.png, flange: {xyz, rpy|quat}}, ...], axes_reference: 0, "
+                 "axes_moves: [1, ...]} (images relative to it)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  he->add_option("--board", o.board, "inner corners per row x column, e.g. 9x6")->required()->check(board_check);
+  he->add_option("--square", o.square, "chessboard square size [m]")->required()->check(positive());
+  he->add_option("--touched", o.touched, "touched.yaml {origin: [x,y,z]}: the board origin touched in the reference view (axes method)")
+      ->check(CLI::ExistingFile);
+  he->add_option("--method", o.hand_eye_method, "the result written: axes | tsai | park | horaud | andreff | daniilidis | visp | refined")
+      ->check(CLI::IsMember({"axes", "tsai", "park", "horaud", "andreff", "daniilidis", "visp", "refined"}))
+      ->capture_default_str();
+  he->add_option("--parent", o.parent, "parent frame")->capture_default_str();
+  he->add_option("--child", o.child_camera, "child (camera) frame")->capture_default_str();
+  he->add_option("--out", o.out, "transform calibration YAML to write")->required();
+
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
   return cellsight_tools::runTool([&] {
     makeDirs(parentDir(o.out));  // the output's folder, as a user expects of --out
     if (in->parsed()) return intrinsics(o);
     if (ex->parsed()) return extrinsics(o);
+    if (he->parsed()) return handEye(o);
     return laser(o);
   });
 }

@@ -2,7 +2,9 @@
 //   detect  one image → decoded codes, their poses, the fixtures and user frames (JSON)
 //   sim     a scene's fixture camera rendered N times → UCS error vs the simulator's truth
 //   decode  a folder of photos with expected texts → byte-exact decode rate (all decoders, zbar alone)
+#include <cmath>
 #include <fstream>
+#include <map>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -13,6 +15,7 @@
 #include "cellsight/eval/fixture_eval.hpp"
 #include "cli_args.hpp"
 #include "json_pose.hpp"
+#include "gnuplot.hpp"
 
 using namespace cellsight;
 using nlohmann::json;
@@ -81,12 +84,25 @@ int main(int argc, char** argv) {
   sim->add_option("--renders", renders, "renders (sensor noise redrawn each time)")
       ->check(cellsight_tools::positiveInt())->capture_default_str();
   sim->add_option("--seed", seed, "noise seed")->capture_default_str();
+  std::string dump_misses;
+  sim->add_option("--dump-misses", dump_misses, "write the renders in which a fixture was not reported here (PNG)");
 
   std::string node_file;
   CLI::App* cmp = app.add_subcommand("compare", "the user frames qr_frame_adjustment wrote (~output_file) vs the scene's truth");
   cmp->add_option("--fixtures", node_file, "the node's JSON (e.g. out/demo/fixtures_raw.json)")->required()->check(CLI::ExistingFile);
   cmp->add_option("--scene", scene_file, "scene YAML")->required()->check(CLI::ExistingFile);
   cmp->add_option("--registry", registry_file, "fixture registry")->required()->check(CLI::ExistingFile);
+
+  std::string plot_png;
+  HandEyeSweepConfig hc;
+  CLI::App* sweep = app.add_subcommand("handeye-sweep",
+                                       "fixture camera to robot calibration, every method on the same synthetic views, "
+                                       "one noise factor swept at a time");
+  sweep->add_option("--scene", scene_file, "scene YAML (its fixture camera)")->required()->check(CLI::ExistingFile);
+  sweep->add_option("--views", hc.views, "flange poses per calibration")->check(cellsight_tools::positiveInt())->capture_default_str();
+  sweep->add_option("--trials", hc.trials, "data sets per point")->check(cellsight_tools::positiveInt())->capture_default_str();
+  sweep->add_option("--seed", hc.seed, "noise seed")->capture_default_str();
+  sweep->add_option("--plot", plot_png, "PNG: table-point error per method over each factor (gnuplot; data and script beside it)");
 
   CLI::App* dec = app.add_subcommand("decode", "byte-exact decode rate on photos with <name>.txt beside each");
   dec->add_option("--images", folder, "folder (searched recursively)")->required()->check(CLI::ExistingDirectory);
@@ -96,7 +112,7 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"visp", "ippe_square"}))->capture_default_str();
     s->add_flag("--free", free_pose, "report the free 6-DoF pose instead of the table-constrained one");
   }
-  for (CLI::App* s : {det, sim, dec, cmp}) s->add_option("--json", json_out, "also write the JSON here (atomically)");
+  for (CLI::App* s : {det, sim, dec, cmp, sweep}) s->add_option("--json", json_out, "also write the JSON here (atomically)");
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
 
   return cellsight_tools::runTool([&] {
@@ -127,6 +143,7 @@ int main(int argc, char** argv) {
       FixtureSimConfig sc;
       sc.renders = renders;
       sc.seed = seed;
+      sc.dump_misses = dump_misses;
       sc.adjustment = ac;
       const FixtureSimResult r = evaluateFixturesSim(scene, reg, cam, pose.T_parent_child, sc);
       json list = json::array();
@@ -144,7 +161,44 @@ int main(int argc, char** argv) {
       }
       out = {{"renders", r.renders}, {"pose", free_pose ? "free 6-DoF (" + method + ")" : "table-constrained"},
              {"calibration", calibration}, {"fixtures", list}, {"false_fixtures", r.false_fixtures},
-             {"detect_ms_median", r.detect_ms_median}, {"adjust_ms_median", r.adjust_ms_median}};
+             {"detect_ms_median", r.detect_ms_median}, {"adjust_ms_median", r.adjust_ms_median},
+             {"messages", r.messages}, {"decoders", r.decoders}};
+    } else if (*sweep) {
+      const Scene scene = loadScene(scene_file);
+      const auto rows = handEyeSweep(scene, hc);
+      json list = json::array();
+      std::map<std::string, std::vector<const HandEyeSweepRow*>> by_factor;
+      for (const auto& r : rows) {
+        json methods = json::object();
+        for (size_t k = 0; k < r.methods.size(); ++k) {
+          methods[r.methods[k]] = {{"t_err_mm", std::isfinite(r.t_err_mm[k]) ? json(r.t_err_mm[k]) : json(nullptr)},
+                                   {"r_err_deg", std::isfinite(r.r_err_deg[k]) ? json(r.r_err_deg[k]) : json(nullptr)},
+                                   {"failures", r.failures[k]}};
+        }
+        list.push_back({{"factor", r.factor}, {"value", r.value}, {"methods", methods}});
+        by_factor[r.factor].push_back(&r);
+      }
+      out = {{"views", hc.views}, {"trials", hc.trials},
+             {"realistic", {{"corner_sigma_px", hc.corner_sigma_px}, {"repeatability_mm", hc.repeatability_mm},
+                            {"flange_rotation_deg", hc.flange_rotation_deg}, {"pointer_sigma_mm", hc.pointer_sigma_mm}}},
+             {"error", "t_err_mm: a table point under the camera as the calibrated camera places it; r_err_deg: the camera's rotation"},
+             {"rows", list}};
+      if (!plot_png.empty()) {
+        for (const auto& [factor, rs] : by_factor) {
+          std::vector<double> x;
+          std::vector<std::pair<std::string, std::vector<double>>> series;
+          for (size_t k = 0; k < rs.front()->methods.size(); ++k) series.push_back({rs.front()->methods[k], {}});
+          for (const HandEyeSweepRow* r : rs) {
+            x.push_back(r->value);
+            for (size_t k = 0; k < r->methods.size(); ++k) series[k].second.push_back(r->t_err_mm[k]);
+          }
+          std::string png = plot_png;
+          const auto dot = png.rfind(".png");
+          png = (dot == std::string::npos ? png : png.substr(0, dot)) + "_" + factor + ".png";
+          cellsight_tools::plotLines(png, "fixture camera calibration: error at the table vs " + factor, factor,
+                                     {"table point error [mm]", false, true}, x, series);
+        }
+      }
     } else if (*cmp) {
       const Scene scene = loadScene(scene_file);
       const FixtureRegistry reg = loadFixtureRegistry(registry_file);

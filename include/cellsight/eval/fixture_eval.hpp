@@ -3,10 +3,12 @@
 // run was given, the user frames compared with the truth; and decoding rates on photo folders.
 #pragma once
 #include <Eigen/Geometry>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "cellsight/fixtures/fixture_adjustment.hpp"
+#include "cellsight/fixtures/hand_eye.hpp"
 #include "cellsight/sim/scene.hpp"
 
 namespace cellsight {
@@ -37,6 +39,7 @@ struct FixtureErrorStats {
 
 struct FixtureSimConfig {
   int renders = 100;
+  std::string dump_misses;   ///< folder: renders where a fixture of the scene was not reported (PNG)
   uint64_t seed = 1;
   QrDetectorConfig detector;
   FixtureAdjustmentConfig adjustment;
@@ -46,6 +49,8 @@ struct FixtureSimResult {
   std::vector<FixtureErrorStats> fixtures;
   int renders = 0;
   int false_fixtures = 0;        ///< fixture reports of a type absent from the scene
+  std::map<std::string, int> messages;  ///< what the adjustment refused or ignored, and how often
+  std::map<std::string, int> decoders;  ///< codes per decoder path (zbar_region, zbar, zbar_2x, wechat, …)
   double detect_ms_median = 0;   ///< decoding + refinement per frame
   double adjust_ms_median = 0;   ///< poses + averaging per frame
 };
@@ -66,5 +71,37 @@ struct DecodeRate {
 
 /// Every image under `folder` (png, jpg) with a `<name>.txt` beside it holding the expected text.
 DecodeRate evaluateDecodeRate(const std::string& folder, const QrDetectorConfig& config = {});
+
+/// Camera–robot calibration of the fixture camera on synthetic data: a 9×6 board (30 mm squares)
+/// on top of the robot's tool, `views` flange poses in the camera's view (the first seven: a
+/// reference and ±50 mm moves along the base axes, for the axes method), the board corners
+/// projected with the scene's true camera and disturbed by `corner_sigma_px`, their PnP pose;
+/// the flange poses reported with repeatability noise (σ per axis) and an orientation noise.
+struct HandEyeSweepConfig {
+  int views = 20;
+  int trials = 10;
+  uint64_t seed = 1;
+  double corner_sigma_px = 0.1;
+  double repeatability_mm = 0.02;
+  double flange_rotation_deg = 0.002;
+  double pointer_sigma_mm = 0.05;      ///< the axes method's touch of the target origin
+};
+
+/// One synthetic data set; the truth returned beside it (for the evaluation only).
+HandEyeInput simulateHandEyeViews(const Scene& scene, const HandEyeSweepConfig& config, uint64_t seed,
+                                  Eigen::Isometry3d* true_base_camera, Eigen::Isometry3d* true_flange_target);
+
+struct HandEyeSweepRow {
+  std::string factor;    ///< corner_sigma_px | repeatability_mm | flange_rotation_deg
+  double value = 0;
+  /// per method: mean error over the trials of a table point under the camera (mm) and of the
+  /// rotation (deg); failures counted apart (a failed trial is never averaged in)
+  std::vector<std::string> methods;
+  std::vector<double> t_err_mm, r_err_deg;
+  std::vector<int> failures;
+};
+
+/// Each factor swept with the others at the config's (realistic) values.
+std::vector<HandEyeSweepRow> handEyeSweep(const Scene& scene, const HandEyeSweepConfig& config);
 
 }  // namespace cellsight

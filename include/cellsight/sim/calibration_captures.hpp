@@ -18,6 +18,8 @@ struct CalibrationCaptureConfig {
   int board_cols = 9, board_rows = 6;  ///< inner corners per row, per column
   double square = 0.025;               ///< metres
   double fixture_square = 0.05;        ///< the fixture camera's board (same corner count), metres
+  int hand_eye_views = 20;             ///< fixture camera to robot: views of a board on the tool
+  double hand_eye_square = 0.03;       ///< that board's squares (same corner count), metres
   int intrinsic_views = 15;
   int laser_views = 12;
   double tcp_length = 0.15;            ///< pointer tip along the flange z axis, metres
@@ -34,6 +36,16 @@ struct CalibrationCaptureConfig {
 cv::Mat renderChessboardView(const Scene& scene, const CameraConfig& camera, const Eigen::Isometry3d& T_base_board,
                              const CalibrationCaptureConfig& board, uint64_t seed);
 
+/// Flange poses for an eye-to-hand calibration of a stationary, downward-looking `camera`: a
+/// target (its points in its own frame) carried at T_flange_target. The first seven are a
+/// reference 0.25 m above the table point under the camera and ±50 mm moves along the base axes
+/// from it (orientation unchanged: the thesis's axes method); then poses tilted up to 25° with a
+/// yaw within ±45°, every target point in the image (30 px margin), the target facing the camera.
+std::vector<Eigen::Isometry3d> handEyeFlangePoses(const Scene& scene, const CameraConfig& camera,
+                                                  const Eigen::Isometry3d& T_flange_target,
+                                                  const std::vector<Eigen::Vector3d>& target_points, int count,
+                                                  uint64_t seed);
+
 struct CalibrationCaptureFiles {
   std::string intrinsics_dir;   ///< view_NN.png
   std::string pattern_image;    ///< extrinsics/pattern.png
@@ -44,6 +56,8 @@ struct CalibrationCaptureFiles {
   std::string fixture_pattern_image;
   std::string fixture_taught;
   double fixture_square = 0;
+  std::string hand_eye_dir;     ///< view_NN.png, flange_poses.yaml, touched.yaml (fixture camera)
+  double hand_eye_square = 0;
   std::string board;            ///< "9x6"
   double square = 0;
 };
