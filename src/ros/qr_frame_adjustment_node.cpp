@@ -3,7 +3,8 @@
 //   in:  fixture_camera/image_raw + camera_info (intrinsics from ~camera_file when set, as a
 //        driver's camera_info_url), tf base ← camera optical frame at the image's stamp
 //   out: ~fixtures (cellsight/FixtureArray), tf fixture/<id> and ucs/<program>, ~markers,
-//        ~adjust (AdjustFixtures: detect now), ~teach (TeachFixture: store a program's UCS)
+//        ~adjust (AdjustFixtures: detect now), ~teach (TeachFixture: store a program's UCS in
+//        ~teach_file, by default the registry itself, written atomically)
 // A fixture not seen in the latest image keeps its last good pose, marked stale. An image
 // without its camera pose in tf is dropped with a log (never read with an identity).
 #include <geometry_msgs/TransformStamped.h>
@@ -46,6 +47,8 @@ class QrFrameAdjustment {
       : diag_(nh, pnh, "qr_frame_adjustment", "images"), listener_(buffer_), it_(nh) {
     registry_file_ = cellsight_ros::requireParam<std::string>(pnh, "registry", "the fixture registry, config/fixtures.yaml");
     registry_ = cellsight::loadFixtureRegistry(registry_file_);
+    teach_file_ = registry_file_;
+    cellsight_ros::param(pnh, "teach_file", teach_file_);
     std::string camera_file, pose = "table", method = "visp";
     cellsight_ros::param(pnh, "camera_file", camera_file);
     cellsight_ros::param(pnh, "pose", pose);
@@ -267,14 +270,14 @@ class QrFrameAdjustment {
     t->T_fixture_ucs = cellsight_ros::fromPoseMsg(it->second.fixture).inverse() * T_base_ucs;
     t->taught = cellsight::isoDateNow();
     try {
-      cellsight::saveFixtureRegistry(registry_file_, next);
+      cellsight::saveFixtureRegistry(teach_file_, next);
     } catch (const std::exception& e) {
       res.message = std::string("cannot write the registry (kept unchanged): ") + e.what();
       return true;
     }
     registry_ = next;
     res.success = true;
-    res.message = "program " + t->program + "'s user frame taught on fixture " + req.type + " and saved to " + registry_file_;
+    res.message = "program " + t->program + "'s user frame taught on fixture " + req.type + " and saved to " + teach_file_;
     ROS_INFO("qr_frame_adjustment: %s", res.message.c_str());
     return true;
   }
@@ -288,7 +291,7 @@ class QrFrameAdjustment {
   ros::Publisher fixtures_pub_, markers_pub_;
   ros::ServiceServer adjust_srv_, teach_srv_;
   ros::Timer frame_timer_;
-  std::string registry_file_, output_file_;
+  std::string registry_file_, teach_file_, output_file_;
   cellsight::FixtureRegistry registry_;
   cellsight::FixtureAdjustmentConfig config_;
   cellsight::CameraIntrinsics camera_;

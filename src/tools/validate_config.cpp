@@ -19,6 +19,7 @@
 #include "cellsight/common/trajectory.hpp"
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/common/yaml_reader.hpp"
+#include "cellsight/fixtures/fixture_registry.hpp"
 #include "cli_args.hpp"
 
 namespace {
@@ -72,6 +73,13 @@ std::string validateFile(const std::string& f) {
   if (node.IsMap() && (node["line"] || node["triangulation"] || node["outlier_k"])) {
     cellsight::loadScannerSettings(f);
     return "scanner settings";
+  }
+  if (node.IsMap() && node["fixtures"] && node["fixtures"].IsSequence() &&
+      (node["fixtures"].size() == 0 || node["fixtures"][0]["codes"])) {
+    const auto r = cellsight::loadFixtureRegistry(f);
+    size_t codes = 0;
+    for (const auto& t : r.fixtures) codes += t.codes.size();
+    return "fixture registry (" + std::to_string(r.fixtures.size()) + " fixture types, " + std::to_string(codes) + " codes)";
   }
   if (node.IsMap() && node["seeds"]) {  // the held-out seeds of random cells
     cellsight::YamlMap m(node, f);

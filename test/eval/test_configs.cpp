@@ -1,6 +1,8 @@
 // Every shipped YAML loads; broken scenes are rejected with the file and the field named.
 #include <gtest/gtest.h>
 
+#include "cellsight/fixtures/fixture_registry.hpp"
+
 #include <algorithm>
 #include <filesystem>
 
@@ -73,7 +75,10 @@ TEST(ShippedConfig, DemoSceneMatchesTheThesisWorkspace) {
   EXPECT_NEAR(s.workspace.sizes().z(), 0.10, 1e-9);
   EXPECT_EQ(s.scanner_camera.intrinsics.width, 1920);
   EXPECT_EQ(s.scanner_camera.intrinsics.height, 1080);
-  EXPECT_EQ(s.fixtures.size(), 2u);
+  // fixtures A and B with one code each, C with three; every code known to the registry
+  EXPECT_EQ(s.fixtures.size(), 5u);
+  const FixtureRegistry reg = loadFixtureRegistry(kConfig + "/fixtures.yaml");
+  for (const auto& f : s.fixtures) EXPECT_NE(reg.find(f.payload), nullptr) << f.payload;
   int parts = 0;
   bool sphere = false;
   for (const auto& o : s.objects) {

@@ -1,0 +1,159 @@
+// robot_bridge: the cell as a robot controller sees it, over TCP without ROS on its side
+// (protocol: include/cellsight/bridge/robot_bridge.hpp, docs/bridge.md).
+//   ADJUST       calls qr_frame_adjustment's ~adjust service (detect now), answers the program and its UCS
+//   UCS <prog>   the latest user frame of that program from qr_frame_adjustment's ~fixtures
+//   INPOS <seq>  publishes io/in_position and answers when io/capture_done comes (stop-and-go)
+// Bound to loopback unless ~bind_address is set, and then only with an ~allow list.
+#include <ros/ros.h>
+#include <std_msgs/Bool.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
+
+#include "cellsight/AdjustFixtures.h"
+#include "cellsight/FixtureArray.h"
+#include "cellsight/bridge/robot_bridge.hpp"
+#include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/diagnostics.hpp"
+#include "cellsight_ros/node.hpp"
+#include "cellsight_ros/params.hpp"
+
+namespace {
+
+class RobotBridgeNode {
+ public:
+  RobotBridgeNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : diag_(nh, pnh, "robot_bridge", "requests") {
+    cellsight::RobotBridgeConfig c;
+    std::string convention = "kuka";
+    int port = 30300, max_line = 256;
+    cellsight_ros::param(pnh, "port", port);
+    cellsight_ros::param(pnh, "bind_address", c.server.bind_address);
+    cellsight_ros::param(pnh, "allow", c.server.allow);
+    cellsight_ros::param(pnh, "convention", convention);
+    cellsight_ros::param(pnh, "max_line", max_line);
+    cellsight_ros::param(pnh, "max_clients", c.server.max_clients);
+    cellsight_ros::param(pnh, "line_timeout", c.server.line_timeout);
+    cellsight_ros::param(pnh, "idle_timeout", c.server.idle_timeout);
+    cellsight_ros::param(pnh, "adjust_timeout", adjust_timeout_);
+    cellsight_ros::param(pnh, "capture_timeout", capture_timeout_);
+    std::string adjust_service = "qr_frame_adjustment/adjust", fixtures_topic = "qr_frame_adjustment/fixtures";
+    cellsight_ros::param(pnh, "adjust_service", adjust_service);
+    cellsight_ros::param(pnh, "fixtures_topic", fixtures_topic);
+    if (port < 0 || port > 65535) throw std::runtime_error("~port must be 0..65535, not " + std::to_string(port));
+    if (max_line < 16 || max_line > 65536) throw std::runtime_error("~max_line must be 16..65536");
+    c.server.port = port;
+    c.server.max_line = static_cast<size_t>(max_line);
+    c.convention = cellsight::parsePoseConvention(convention);
+    adjust_ = nh.serviceClient<cellsight::AdjustFixtures>(adjust_service);
+    fixtures_sub_ = nh.subscribe(fixtures_topic, 1, &RobotBridgeNode::onFixtures, this);
+    in_position_pub_ = nh.advertise<std_msgs::Bool>("io/in_position", 10);
+    capture_done_sub_ = nh.subscribe("io/capture_done", 10, &RobotBridgeNode::onCaptureDone, this);
+    cellsight::BridgeCallbacks cb;
+    cb.adjust = [this] { return adjust(); };
+    cb.ucs = [this](const std::string& p) { return ucs(p); };
+    cb.in_position = [this](uint64_t seq) { return inPosition(seq); };
+    bridge_ = std::make_unique<cellsight::RobotBridge>(c, cb);
+    pnh.setParam("bound_port", bridge_->port());  // the port actually bound (~port 0: any free one)
+    diag_.addValue("connections", [this] { return std::to_string(bridge_->stats().clients); });
+    ROS_INFO("robot_bridge: listening on %s:%d (%s poses, %zu allowed addresses%s)", c.server.bind_address.c_str(),
+             bridge_->port(), convention.c_str(), c.server.allow.size(), c.server.allow.empty() ? ": loopback only" : "");
+  }
+
+ private:
+  cellsight::BridgeAnswer adjust() {
+    cellsight::BridgeAnswer a;
+    cellsight::AdjustFixtures srv;
+    srv.request.timeout = adjust_timeout_;
+    if (!adjust_.call(srv)) {
+      a.code = "UNAVAILABLE";
+      a.message = "the fixture service " + adjust_.getService() + " did not answer (is qr_frame_adjustment running?)";
+      diag_.dropped("adjust service unavailable");
+      return a;
+    }
+    const auto& r = srv.response;
+    if (r.status != r.OK || r.fixtures.empty()) {
+      a.code = r.status == r.NO_IMAGE ? "NO_IMAGE" : r.status == r.NO_TRANSFORM ? "NO_TRANSFORM" : "NO_FIXTURE";
+      a.message = r.message;
+      diag_.processed();
+      return a;
+    }
+    const auto& f = r.fixtures.front();
+    a.ok = true;
+    a.fixture = f.id;
+    a.type = f.type;
+    a.program = f.program;
+    a.ucs = cellsight_ros::fromPoseMsg(f.ucs);
+    diag_.processed();
+    return a;
+  }
+
+  cellsight::BridgeAnswer ucs(const std::string& program) {
+    cellsight::BridgeAnswer a;
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& f : fixtures_.fixtures) {
+      if (f.program != program) continue;
+      a.ok = true;
+      a.fixture = f.id;
+      a.type = f.type;
+      a.program = f.program;
+      a.ucs = cellsight_ros::fromPoseMsg(f.ucs);
+      a.stale = f.stale;
+      return a;
+    }
+    a.code = "UNKNOWN_PROGRAM";
+    a.message = "no fixture seen runs program " + program;
+    return a;
+  }
+
+  cellsight::BridgeAnswer inPosition(uint64_t seq) {
+    cellsight::BridgeAnswer a;
+    std::unique_lock<std::mutex> lock(mutex_);
+    const uint64_t before = captures_;
+    waiting_ = true;  // a capture_done counts only while a request waits (not a latched old one)
+    std_msgs::Bool msg;
+    msg.data = true;
+    in_position_pub_.publish(msg);
+    const bool done = cv_.wait_for(lock, std::chrono::duration<double>(capture_timeout_), [&] { return captures_ > before; });
+    waiting_ = false;
+    if (!done) {
+      a.code = "CAPTURE";
+      a.message = "no io/capture_done within " + std::to_string(capture_timeout_) + " s (is camera_trigger running?)";
+      ROS_WARN("robot_bridge: INPOS %lu: %s", static_cast<unsigned long>(seq), a.message.c_str());
+      return a;
+    }
+    a.ok = true;
+    return a;
+  }
+
+  void onFixtures(const cellsight::FixtureArray& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    fixtures_ = msg;
+  }
+
+  void onCaptureDone(const std_msgs::Bool& msg) {
+    if (!msg.data) return;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!waiting_) return;
+      ++captures_;
+    }
+    cv_.notify_all();
+  }
+
+  cellsight_ros::NodeDiagnostics diag_;
+  ros::ServiceClient adjust_;
+  ros::Subscriber fixtures_sub_, capture_done_sub_;
+  ros::Publisher in_position_pub_;
+  double adjust_timeout_ = 5.0, capture_timeout_ = 10.0;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  uint64_t captures_ = 0;
+  bool waiting_ = false;
+  cellsight::FixtureArray fixtures_;
+  std::unique_ptr<cellsight::RobotBridge> bridge_;
+};
+
+}  // namespace
+
+CELLSIGHT_NODE(RobotBridgeNode, "robot_bridge", 2)
