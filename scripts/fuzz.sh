@@ -12,7 +12,7 @@ BUILD=$(realpath -m "${2:-_build_san}")
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 # shellcheck disable=SC1091
 source "$ROOT/scripts/report-failure.sh"
-TARGETS=${FUZZ_TARGETS:-"fuzz_mesh fuzz_cloud fuzz_yaml fuzz_ros_msgs"}
+TARGETS=${FUZZ_TARGETS:-"fuzz_mesh fuzz_cloud fuzz_yaml fuzz_ros_msgs fuzz_bridge"}
 case $SECONDS_PER_TARGET in ''|*[!0-9]*) echo "fuzz: seconds per target must be a whole number, not '$SECONDS_PER_TARGET'" >&2; exit 2 ;; esac
 
 bash "$ROOT/scripts/sanitize.sh" --configure-only "$BUILD"
