@@ -97,6 +97,13 @@ while [ ! -f "$OUT/fixtures_raw.json" ]; do
   fi
   sleep 0.5
 done
+# the simulated robot controller asks the bridge which fixture lies there and for the programs' user frames
+BRIDGE_PORT=$(rosparam get /robot_bridge/bound_port 2>/dev/null || echo 0)
+if ! "$TOOLS/cellsight_robot_client" --port "$BRIDGE_PORT" --json "$OUT/robot_session.json" \
+    "HELLO demo_controller" ADJUST "UCS weld_a" "UCS glue_b" "UCS pick_c" QUIT >"$OUT/logs/robot_session.log" 2>&1; then
+  echo "demo: FAILED: the simulated controller's session with robot_bridge: $(tail -1 "$OUT/logs/robot_session.log")" >&2
+  exit 1
+fi
 sleep 3  # let rviz draw the last frame
 screenshot "$OUT/rviz.png"
 # What the 2 MP frames cost between processes (nodelets pass them by pointer inside the manager).
