@@ -77,26 +77,24 @@ while [ ! -f "$OUT/scan_result.json" ]; do
   sleep 0.5
 done
 t4=$(now)
+# wait_for FILE SECONDS NODES WHAT: wait until a node has written FILE; fail when one of NODES
+# (a grep -E pattern) died or after SECONDS, with their last log lines
+wait_for() {
+  local file=$1 seconds=$2 nodes=$3 what=$4
+  local deadline=$(( $(date +%s) + seconds ))
+  while [ ! -f "$file" ]; do
+    if [ "$(date +%s)" -gt "$deadline" ] || grep -qE "($nodes).*has died" "$OUT/launch.log"; then
+      echo "demo: FAILED: $what within $seconds s; see $OUT/launch.log" >&2
+      grep -E "$nodes" "$OUT/launch.log" | tail -5 >&2 || echo "demo: (no line of $nodes in launch.log)" >&2
+      exit 1
+    fi
+    sleep 0.5
+  done
+}
 # model_matching writes detections_raw.json once the scan's clusters are matched.
-deadline=$(( $(date +%s) + 180 ))
-while [ ! -f "$OUT/detections_raw.json" ]; do
-  if [ "$(date +%s)" -gt "$deadline" ] || grep -q "model_matching.*has died" "$OUT/launch.log"; then
-    echo "demo: FAILED: no detections 180 s after the scan; see $OUT/launch.log" >&2
-    grep -E "model_matching|clustering" "$OUT/launch.log" | tail -5 >&2 || echo "demo: (no model_matching or clustering line in launch.log)" >&2
-    exit 1
-  fi
-  sleep 0.5
-done
+wait_for "$OUT/detections_raw.json" 180 "model_matching|clustering" "no detections after the scan"
 # the QR fixtures: qr_frame_adjustment writes its user frames with every fixture camera image (2 Hz)
-deadline=$(( $(date +%s) + 60 ))
-while [ ! -f "$OUT/fixtures_raw.json" ]; do
-  if [ "$(date +%s)" -gt "$deadline" ] || grep -q "qr_frame_adjustment.*has died" "$OUT/launch.log"; then
-    echo "demo: FAILED: qr_frame_adjustment wrote no fixtures; see $OUT/launch.log" >&2
-    grep -E "qr_frame_adjustment" "$OUT/launch.log" | tail -5 >&2 || echo "demo: (no qr_frame_adjustment line in launch.log)" >&2
-    exit 1
-  fi
-  sleep 0.5
-done
+wait_for "$OUT/fixtures_raw.json" 60 "qr_frame_adjustment" "qr_frame_adjustment wrote no fixtures"
 # the simulated robot controller asks the bridge which fixture lies there and for the programs' user frames
 BRIDGE_PORT=$(rosparam get /robot_bridge/bound_port 2>/dev/null || echo 0)
 if ! "$TOOLS/cellsight_robot_client" --port "$BRIDGE_PORT" --json "$OUT/robot_session.json" \

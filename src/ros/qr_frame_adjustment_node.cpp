@@ -67,6 +67,8 @@ class QrFrameAdjustment {
     cellsight::QrDetectorConfig dc;
     dc.expected_codes = 0;
     for (const auto& f : registry_.fixtures) dc.expected_codes += static_cast<int>(f.codes.size());
+    registry_codes_ = dc.expected_codes;
+    cellsight_ros::param(pnh, "full_search_every", full_search_every_);
     detector_ = std::make_unique<cellsight::QrDetector>(dc);
     fixtures_pub_ = pnh.advertise<cellsight::FixtureArray>("fixtures", 1, true);
     markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", 1, true);
@@ -115,7 +117,21 @@ class QrFrameAdjustment {
     }
     cellsight::AdjustmentResult result;
     try {
-      result = cellsight::adjustFixtures(detector_->detect(img, &cam), registry_, cam, T_base_camera, config_);
+      // The wider passes (whole frame, enlarged, wechat_qrcode) run while fewer codes are found
+      // than were seen in the last image, on every ~full_search_every-th image and for an
+      // ~adjust request; otherwise absent fixtures would cost them on every image.
+      int expected = std::max(1, last_codes_);
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (full_search_pending_ || full_search_every_ <= 1 || images_ % static_cast<uint64_t>(full_search_every_) == 0) {
+          expected = registry_codes_;
+        }
+        full_search_pending_ = false;
+        ++images_;
+      }
+      const auto detections = detector_->detect(img, &cam, expected);
+      last_codes_ = static_cast<int>(detections.size());
+      result = cellsight::adjustFixtures(detections, registry_, cam, T_base_camera, config_);
     } catch (const std::exception& e) {
       ROS_ERROR_THROTTLE(5, "qr_frame_adjustment: image dropped: %s", e.what());
       diag_.dropped("detection failed");
@@ -231,6 +247,7 @@ class QrFrameAdjustment {
 
   bool onAdjust(cellsight::AdjustFixtures::Request& req, cellsight::AdjustFixtures::Response& res) {
     std::unique_lock<std::mutex> lock(mutex_);
+    full_search_pending_ = true;  // the next image gets every pass
     const uint64_t start = frames_;
     const double timeout = req.timeout > 0 ? req.timeout : 5.0;
     if (!cv_.wait_for(lock, std::chrono::duration<double>(timeout), [&] { return frames_ > start; })) {
@@ -300,7 +317,9 @@ class QrFrameAdjustment {
   std::unique_ptr<cellsight::QrDetector> detector_;
   std::mutex mutex_;
   std::condition_variable cv_;
-  uint64_t frames_ = 0;
+  uint64_t frames_ = 0, images_ = 0;
+  int registry_codes_ = 1, last_codes_ = 0, full_search_every_ = 10;
+  bool full_search_pending_ = false;
   uint8_t last_status_ = cellsight::AdjustFixtures::Response::NO_IMAGE;
   std::string last_message_;
   std::map<std::string, cellsight::Fixture> state_;
