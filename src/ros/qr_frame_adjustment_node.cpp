@@ -213,7 +213,7 @@ class QrFrameAdjustment {
         markers.markers.push_back(m);
         m.ns = "label";
         m.type = visualization_msgs::Marker::TEXT_VIEW_FACING;
-        m.text = id + " → " + f.program + (f.stale ? " (stale)" : "");
+        m.text = id + ": " + f.program + (f.stale ? " (stale)" : "");  // ASCII: rviz's text markers crash on UTF-8
         m.scale.z = 0.015;
         m.pose.position.z += 0.02;
         markers.markers.push_back(m);
