@@ -73,13 +73,20 @@ LineServer::LineServer(const LineServerConfig& config, Handler handler, Closed c
     ::close(listen_fd_);
     throw std::runtime_error(std::string("robot bridge: pipe: ") + std::strerror(errno));
   }
-  thread_ = std::thread([this] { run(); });
 }
 
-LineServer::~LineServer() {
+void LineServer::start() {
+  if (!thread_.joinable() && !stop_) thread_ = std::thread([this] { run(); });
+}
+
+void LineServer::stop() {
   stop_ = true;
   wake();
   if (thread_.joinable()) thread_.join();
+}
+
+LineServer::~LineServer() {
+  stop();
   for (auto& [id, c] : clients_) {
     ::close(c->fd);
     delete c;
@@ -111,7 +118,7 @@ void LineServer::close(uint64_t id, const std::string& code, const std::string& 
     std::lock_guard<std::mutex> lock(mutex_);
     const auto it = clients_.find(id);
     if (it == clients_.end() || it->second->closing) return;
-    it->second->out += "ERR " + code + " " + reason + "\n";
+    if (!code.empty()) it->second->out += "ERR " + code + " " + reason + "\n";
     it->second->closing = true;
     it->second->closing_since = now();
     it->second->close_reason = code;
@@ -143,10 +150,11 @@ void LineServer::run() {
   std::vector<pollfd> fds;
   std::vector<uint64_t> ids;
   char buf[4096];
+  double listen_paused_until = 0;  // out of file descriptors: the listener rests a moment
   while (!stop_) {
     fds.clear();
     ids.clear();
-    fds.push_back({listen_fd_, POLLIN, 0});
+    fds.push_back({listen_fd_, static_cast<short>(now() < listen_paused_until ? 0 : POLLIN), 0});
     fds.push_back({wake_[0], POLLIN, 0});
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -165,7 +173,10 @@ void LineServer::run() {
         sockaddr_in peer{};
         socklen_t len = sizeof(peer);
         const int fd = ::accept4(listen_fd_, reinterpret_cast<sockaddr*>(&peer), &len, SOCK_CLOEXEC | SOCK_NONBLOCK);
-        if (fd < 0) break;
+        if (fd < 0) {
+          if (errno == EMFILE || errno == ENFILE || errno == ENOBUFS || errno == ENOMEM) listen_paused_until = now() + 0.1;
+          break;
+        }
         char ip[INET_ADDRSTRLEN] = {0};
         ::inet_ntop(AF_INET, &peer.sin_addr, ip, sizeof(ip));
         const std::string address = ip;
@@ -205,11 +216,12 @@ void LineServer::run() {
       if (ev & POLLOUT) {
         std::unique_lock<std::mutex> lock(mutex_);
         const ssize_t n = ::send(c->fd, c->out.data(), c->out.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+        const int send_errno = errno;
         if (n > 0) c->out.erase(0, static_cast<size_t>(n));
         const bool done = c->closing && c->out.empty();
         const std::string reason = c->close_reason;
         lock.unlock();
-        if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK) {
+        if (n < 0 && send_errno != EAGAIN && send_errno != EWOULDBLOCK) {
           drop(id, "write error");
           continue;
         }
@@ -250,7 +262,14 @@ void LineServer::run() {
           too_long = too_long || c->in.size() > config_.max_line;
           stats_.lines += lines.size();
         }
-        for (const auto& line : lines) handler_(id, line);
+        for (const auto& line : lines) {
+          {
+            std::lock_guard<std::mutex> lock(mutex_);
+            const auto it = clients_.find(id);
+            if (it == clients_.end() || it->second->closing) break;  // QUIT, TOO_MANY_ERRORS: no more lines
+          }
+          handler_(id, line);
+        }
         if (too_long) {
           close(id, "TOO_LONG", "a line is longer than " + std::to_string(config_.max_line) + " bytes; closing");
           std::lock_guard<std::mutex> lock(mutex_);

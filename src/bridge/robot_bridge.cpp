@@ -8,6 +8,13 @@
 namespace cellsight {
 namespace {
 
+BridgeAnswer unavailable(const std::string& why) {
+  BridgeAnswer a;
+  a.code = "UNAVAILABLE";
+  a.message = why;
+  return a;
+}
+
 bool nameOk(const std::string& s) {
   if (s.empty() || s.size() > 64) return false;
   return std::all_of(s.begin(), s.end(), [](char c) {
@@ -71,29 +78,21 @@ bool parseBridgeRequest(const std::string& line, BridgeRequest& r, std::string& 
 
 RobotBridge::RobotBridge(const RobotBridgeConfig& config, BridgeCallbacks callbacks)
     : config_(config), callbacks_(std::move(callbacks)) {
+  server_ = std::make_unique<LineServer>(
+      config_.server, [this](uint64_t c, const std::string& l) { onLine(c, l); }, [this](uint64_t c) { onClosed(c); });
   worker_ = std::thread([this] { work(); });
-  try {
-    server_ = std::make_unique<LineServer>(
-        config_.server, [this](uint64_t c, const std::string& l) { onLine(c, l); }, [this](uint64_t c) { onClosed(c); });
-  } catch (...) {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    worker_.join();
-    throw;
-  }
+  server_->start();  // lines reach onLine only now, with server_ and the worker in place
 }
 
 RobotBridge::~RobotBridge() {
-  server_.reset();  // no more lines
+  server_->stop();  // no more lines; the server object stays for the worker's last send()
   {
     std::lock_guard<std::mutex> lock(mutex_);
     stop_ = true;
   }
   cv_.notify_all();
   if (worker_.joinable()) worker_.join();
+  server_.reset();
 }
 
 void RobotBridge::onClosed(uint64_t client) {
@@ -131,7 +130,7 @@ void RobotBridge::onLine(uint64_t client, const std::string& line) {
       return;
     case BridgeRequest::Kind::kQuit:
       server_->send(client, "OK BYE");
-      server_->close(client, "BYE", "closing at the client's request");
+      server_->close(client, "", "");
       return;
     default:
       break;
@@ -157,6 +156,7 @@ void RobotBridge::work() {
       if (stop_) return;
       job = jobs_.front();
       jobs_.pop_front();
+      if (!busy_.count(job.first)) continue;  // the client has gone: nothing is run for it
     }
     const auto& [client, req] = job;
     BridgeAnswer a;
@@ -164,18 +164,18 @@ void RobotBridge::work() {
     try {
       switch (req.kind) {
         case BridgeRequest::Kind::kAdjust:
-          a = callbacks_.adjust ? callbacks_.adjust() : BridgeAnswer{false, "UNAVAILABLE", "no fixture detection in this cell"};
+          a = callbacks_.adjust ? callbacks_.adjust() : unavailable("no fixture detection in this cell");
           reply = a.ok ? "OK ADJUST " + a.fixture + " " + a.type + " " + a.program + " " + formatRobotPose(a.ucs, config_.convention)
                        : "ERR " + a.code + " " + a.message;
           break;
         case BridgeRequest::Kind::kUcs:
-          a = callbacks_.ucs ? callbacks_.ucs(req.name) : BridgeAnswer{false, "UNAVAILABLE", "no fixture detection in this cell"};
+          a = callbacks_.ucs ? callbacks_.ucs(req.name) : unavailable("no fixture detection in this cell");
           reply = a.ok ? "OK UCS " + a.program + " " + formatRobotPose(a.ucs, config_.convention) + (a.stale ? " STALE" : " FRESH")
                        : "ERR " + a.code + " " + a.message;
           break;
         case BridgeRequest::Kind::kInPosition:
           a = callbacks_.in_position ? callbacks_.in_position(req.seq)
-                                     : BridgeAnswer{false, "UNAVAILABLE", "no scanner in this cell"};
+                                     : unavailable("no scanner in this cell");
           reply = a.ok ? "OK CAPTURED " + std::to_string(req.seq)
                        : "ERR " + (a.code.empty() ? std::string("CAPTURE") : a.code) + " " + std::to_string(req.seq) + " " + a.message;
           break;

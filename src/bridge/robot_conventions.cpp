@@ -11,10 +11,14 @@ namespace {
 
 // Z-Y-X angles (a about z, b about y, c about x) of R = Rz(a)·Ry(b)·Rx(c)
 Eigen::Vector3d zyx(const Eigen::Matrix3d& R) {
-  const double b = std::atan2(-R(2, 0), std::hypot(R(2, 1), R(2, 2)));
-  const double a = std::atan2(R(1, 0), R(0, 0));
-  const double c = std::atan2(R(2, 1), R(2, 2));
-  return {a, b, c};
+  const double cb = std::hypot(R(2, 1), R(2, 2));
+  const double b = std::atan2(-R(2, 0), cb);
+  if (cb < 1e-9) {
+    // gimbal lock (b = ±90°): only a ∓ c is defined; c = 0, and the middle column is
+    // (−sin a, cos a, 0) for either sign
+    return {std::atan2(-R(0, 1), R(1, 1)), b, 0.0};
+  }
+  return {std::atan2(R(1, 0), R(0, 0)), b, std::atan2(R(2, 1), R(2, 2))};
 }
 
 Eigen::Matrix3d fromZyx(double a, double b, double c) {

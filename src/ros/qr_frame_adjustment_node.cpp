@@ -100,17 +100,23 @@ class QrFrameAdjustment {
       return;
     }
     if (img.type() == CV_8UC3) cv::cvtColor(img, img, cv::COLOR_RGB2GRAY);
+    cellsight::FixtureRegistry registry;  // ~teach may replace registry_ meanwhile
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      registry = registry_;
+    }
     Eigen::Isometry3d T_base_camera;
     try {
-      T_base_camera = tf2::transformToEigen(buffer_.lookupTransform(registry_.base_frame, image->header.frame_id,
+      T_base_camera = tf2::transformToEigen(buffer_.lookupTransform(registry.base_frame, image->header.frame_id,
                                                                     image->header.stamp, ros::Duration(tf_timeout_)));
     } catch (const tf2::TransformException& e) {
       ROS_ERROR_THROTTLE(5, "qr_frame_adjustment: image dropped: no transform %s <- %s at its stamp (%s); is the fixture camera calibrated (calibration_dir/fixture_camera_pose.yaml)?",
-                         registry_.base_frame.c_str(), image->header.frame_id.c_str(), e.what());
+                         registry.base_frame.c_str(), image->header.frame_id.c_str(), e.what());
       diag_.dropped("no tf at the image stamp");
       std::lock_guard<std::mutex> lock(mutex_);
       last_status_ = cellsight::AdjustFixtures::Response::NO_TRANSFORM;
       last_message_ = std::string("no transform for the fixture camera: ") + e.what();
+      last_stamp_ = image->header.stamp;
       ++frames_;
       cv_.notify_all();
       return;
@@ -131,7 +137,7 @@ class QrFrameAdjustment {
       }
       const auto detections = detector_->detect(img, &cam, expected);
       last_codes_ = static_cast<int>(detections.size());
-      result = cellsight::adjustFixtures(detections, registry_, cam, T_base_camera, config_);
+      result = cellsight::adjustFixtures(detections, registry, cam, T_base_camera, config_);
     } catch (const std::exception& e) {
       ROS_ERROR_THROTTLE(5, "qr_frame_adjustment: image dropped: %s", e.what());
       diag_.dropped("detection failed");
@@ -166,6 +172,7 @@ class QrFrameAdjustment {
                                              : cellsight::AdjustFixtures::Response::OK;
       last_message_ = std::to_string(result.fixtures.size()) + " fixture(s) in the image" +
                       (result.messages.empty() ? "" : "; " + result.messages.front());
+      last_stamp_ = image->header.stamp;
       ++frames_;
     }
     cv_.notify_all();
@@ -246,11 +253,13 @@ class QrFrameAdjustment {
   }
 
   bool onAdjust(cellsight::AdjustFixtures::Request& req, cellsight::AdjustFixtures::Response& res) {
+    // an image taken after the request: one already being processed when it came may show the
+    // table before the fixture was put down
+    const ros::Time asked = ros::Time::now();
     std::unique_lock<std::mutex> lock(mutex_);
     full_search_pending_ = true;  // the next image gets every pass
-    const uint64_t start = frames_;
     const double timeout = req.timeout > 0 ? req.timeout : 5.0;
-    if (!cv_.wait_for(lock, std::chrono::duration<double>(timeout), [&] { return frames_ > start; })) {
+    if (!cv_.wait_for(lock, std::chrono::duration<double>(timeout), [&] { return frames_ > 0 && last_stamp_ >= asked; })) {
       res.status = res.NO_IMAGE;
       res.message = "no fixture camera image within " + std::to_string(timeout) + " s (is fixture_camera/image_raw published?)";
       return true;
@@ -318,6 +327,7 @@ class QrFrameAdjustment {
   std::mutex mutex_;
   std::condition_variable cv_;
   uint64_t frames_ = 0, images_ = 0;
+  ros::Time last_stamp_;
   int registry_codes_ = 1, last_codes_ = 0, full_search_every_ = 10;
   bool full_search_pending_ = false;
   uint8_t last_status_ = cellsight::AdjustFixtures::Response::NO_IMAGE;
@@ -328,4 +338,5 @@ class QrFrameAdjustment {
 
 }  // namespace
 
-CELLSIGHT_NODE(QrFrameAdjustment, "qr_frame_adjustment", 2)
+// four threads: images, ~adjust calls waiting for them (one each), ~teach
+CELLSIGHT_NODE(QrFrameAdjustment, "qr_frame_adjustment", 4)

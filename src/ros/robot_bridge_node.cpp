@@ -9,6 +9,9 @@
 
 #include <chrono>
 #include <condition_variable>
+#include <future>
+#include <thread>
+#include <tuple>
 #include <mutex>
 
 #include "cellsight/AdjustFixtures.h"
@@ -65,7 +68,24 @@ class RobotBridgeNode {
     cellsight::BridgeAnswer a;
     cellsight::AdjustFixtures srv;
     srv.request.timeout = adjust_timeout_;
-    if (!adjust_.call(srv)) {
+    // roscpp service calls have no timeout: the call runs on a thread of its own, so a hung
+    // qr_frame_adjustment costs this request a timeout, not the bridge its worker
+    auto result = std::make_shared<std::promise<std::pair<bool, cellsight::AdjustFixtures>>>();
+    auto answer = result->get_future();
+    std::thread([client = adjust_, srv, result]() mutable {
+      const bool ok = client.call(srv);
+      result->set_value({ok, srv});
+    }).detach();
+    if (answer.wait_for(std::chrono::duration<double>(adjust_timeout_ + 5.0)) != std::future_status::ready) {
+      a.code = "TIMEOUT";
+      a.message = "the fixture service " + adjust_.getService() + " did not answer within " +
+                  std::to_string(adjust_timeout_ + 5.0) + " s";
+      diag_.dropped("adjust service timed out");
+      return a;
+    }
+    bool called = false;
+    std::tie(called, srv) = answer.get();
+    if (!called) {
       a.code = "UNAVAILABLE";
       a.message = "the fixture service " + adjust_.getService() + " did not answer (is qr_frame_adjustment running?)";
       diag_.dropped("adjust service unavailable");

@@ -86,6 +86,15 @@ TEST(RobotConventions, EveryConventionRoundTrips) {
   EXPECT_EQ(formatRobotPose(R, PoseConvention::kKuka), "100.000 0.000 0.000 90.0000 0.0000 0.0000");
   EXPECT_EQ(formatRobotPose(R, PoseConvention::kFanuc), "100.000 0.000 0.000 0.0000 0.0000 90.0000");
   EXPECT_EQ(formatRobotPose(R, PoseConvention::kAbb), "100.000 0.000 0.000 0.7071068 0.0000000 0.0000000 0.7071068");
+  // gimbal lock (B = 90°): the pose survives the round trip, C set to 0
+  Eigen::Isometry3d G = Eigen::Isometry3d::Identity();
+  G.linear() = (Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitY()) *
+                Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitX()))
+                   .toRotationMatrix();
+  for (auto c : {PoseConvention::kKuka, PoseConvention::kFanuc, PoseConvention::kRep103}) {
+    const Eigen::Isometry3d back = parseRobotPose(formatRobotPose(G, c), c);
+    EXPECT_LT(Eigen::AngleAxisd(back.linear().transpose() * G.linear()).angle(), 1e-5) << poseConventionName(c);
+  }
   EXPECT_THROW(parseRobotPose("1 2 3", PoseConvention::kKuka), std::invalid_argument);
   EXPECT_THROW(parseRobotPose("1 2 3 4 5 nan", PoseConvention::kKuka), std::invalid_argument);
   EXPECT_THROW(parseRobotPose("1 2 3 0 0 0 0", PoseConvention::kAbb), std::invalid_argument);

@@ -40,17 +40,24 @@ class LineServer {
   /// Called when a client's connection ends (any reason).
   using Closed = std::function<void(uint64_t client)>;
 
-  /// Binds and starts serving; throws std::runtime_error naming the cause (address in use, a
-  /// public address without an allow-list, a bad address).
+  /// Binds and listens (connections wait in the backlog until start()); throws
+  /// std::runtime_error naming the cause (address in use, a public address without an
+  /// allow-list, a bad address).
   LineServer(const LineServerConfig& config, Handler handler, Closed closed = {});
   ~LineServer();
+  /// Starts the serving thread; call once, after whatever the handler uses is ready.
+  void start();
+  /// Stops serving and joins the thread (no handler call after it returns); the destructor
+  /// calls it.
+  void stop();
   LineServer(const LineServer&) = delete;
   LineServer& operator=(const LineServer&) = delete;
 
   int port() const { return port_; }
   /// Queues `line` + "\n" for the client (thread-safe); ignored when the client is gone.
   void send(uint64_t client, const std::string& line);
-  /// Sends "ERR <code> <reason>" and closes the connection once it is written.
+  /// Sends "ERR <code> <reason>" (nothing when `code` is empty) and closes the connection once
+  /// everything queued is written; no further line of the client reaches the handler.
   void close(uint64_t client, const std::string& code, const std::string& reason);
   LineServerStats stats() const;
 
