@@ -35,6 +35,7 @@ struct Acc {
     return std::sqrt(s / static_cast<double>(v.size() - 1));
   }
   double max() const { return v.empty() ? 0 : *std::max_element(v.begin(), v.end()); }
+  ErrorSummary summary() const { return {mean(), sigma(), max()}; }
 };
 
 double medianOf(std::vector<double> v) {
@@ -80,8 +81,6 @@ FixtureSimResult evaluateFixturesSim(const Scene& scene, const FixtureRegistry& 
   dc.expected_codes = 0;
   for (const auto& t : truth) dc.expected_codes += static_cast<int>(t.payloads.size());
   QrDetector detector(dc);
-  FixtureAdjustmentConfig free_cfg = config.adjustment;
-  free_cfg.table_constrained = false;
 
   std::map<std::string, Acc> t_err, r_err, ft_err, fr_err, st_err, sr_err, sig;
   std::map<std::string, int> found;
@@ -128,26 +127,19 @@ FixtureSimResult evaluateFixturesSim(const Scene& scene, const FixtureRegistry& 
       }
     }
   }
-  (void)free_cfg;
   for (const FixtureTruth& t : truth) {
     FixtureErrorStats s;
     s.type = t.type;
     s.program = t.program;
     s.markers = static_cast<int>(t.payloads.size());
     s.found = found[t.type];
-    s.t_err_mean = t_err[t.type].mean();
-    s.t_err_sigma = t_err[t.type].sigma();
-    s.t_err_max = t_err[t.type].max();
-    s.r_err_mean = r_err[t.type].mean();
-    s.r_err_sigma = r_err[t.type].sigma();
-    s.r_err_max = r_err[t.type].max();
-    s.free_t_err_mean = ft_err[t.type].mean();
-    s.free_t_err_sigma = ft_err[t.type].sigma();
-    s.free_r_err_mean = fr_err[t.type].mean();
-    s.free_r_err_sigma = fr_err[t.type].sigma();
-    s.single_t_err_mean = st_err[t.type].mean();
-    s.single_r_err_mean = sr_err[t.type].mean();
-    s.sigma_translation_reported = sig[t.type].mean();
+    s.t_err = t_err[t.type].summary();
+    s.r_err = r_err[t.type].summary();
+    s.free_t_err = ft_err[t.type].summary();
+    s.free_r_err = fr_err[t.type].summary();
+    s.single_t_err = st_err[t.type].summary();
+    s.single_r_err = sr_err[t.type].summary();
+    s.reported_sigma = sig[t.type].summary();
     result.fixtures.push_back(s);
   }
   result.detect_ms_median = medianOf(detect_ms);

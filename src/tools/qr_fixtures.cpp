@@ -148,16 +148,15 @@ int main(int argc, char** argv) {
       const FixtureSimResult r = evaluateFixturesSim(scene, reg, cam, pose.T_parent_child, sc);
       json list = json::array();
       for (const auto& f : r.fixtures) {
+        constexpr double mm = 1000, deg = 180 / M_PI;
         list.push_back({{"payload", f.type}, {"program", f.program}, {"markers", f.markers}, {"found", f.found},
-                        {"t_err_mm", f.t_err_mean * 1000}, {"t_sigma_mm", f.t_err_sigma * 1000},
-                        {"t_max_mm", f.t_err_max * 1000}, {"r_err_deg", f.r_err_mean * 180 / M_PI},
-                        {"r_sigma_deg", f.r_err_sigma * 180 / M_PI}, {"r_max_deg", f.r_err_max * 180 / M_PI},
-                        {"free_t_err_mm", f.free_t_err_mean * 1000}, {"free_t_sigma_mm", f.free_t_err_sigma * 1000},
-                        {"free_r_err_deg", f.free_r_err_mean * 180 / M_PI},
-                        {"free_r_sigma_deg", f.free_r_err_sigma * 180 / M_PI},
-                        {"single_code_free_t_err_mm", f.single_t_err_mean * 1000},
-                        {"single_code_free_r_err_deg", f.single_r_err_mean * 180 / M_PI},
-                        {"reported_sigma_mm", f.sigma_translation_reported * 1000}});
+                        {"t_err_mm", f.t_err.mean * mm}, {"t_sigma_mm", f.t_err.sigma * mm}, {"t_max_mm", f.t_err.max * mm},
+                        {"r_err_deg", f.r_err.mean * deg}, {"r_sigma_deg", f.r_err.sigma * deg}, {"r_max_deg", f.r_err.max * deg},
+                        {"free_t_err_mm", f.free_t_err.mean * mm}, {"free_t_sigma_mm", f.free_t_err.sigma * mm},
+                        {"free_r_err_deg", f.free_r_err.mean * deg}, {"free_r_sigma_deg", f.free_r_err.sigma * deg},
+                        {"single_code_free_t_err_mm", f.single_t_err.mean * mm},
+                        {"single_code_free_r_err_deg", f.single_r_err.mean * deg},
+                        {"reported_sigma_mm", f.reported_sigma.mean * mm}});
       }
       out = {{"renders", r.renders}, {"pose", free_pose ? "free 6-DoF (" + method + ")" : "table-constrained"},
              {"calibration", calibration}, {"fixtures", list}, {"false_fixtures", r.false_fixtures},

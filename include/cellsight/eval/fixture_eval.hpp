@@ -23,18 +23,19 @@ struct FixtureTruth {
 };
 std::vector<FixtureTruth> fixtureTruth(const Scene& scene, const FixtureRegistry& registry);
 
+/// Mean, σ and maximum of one error over the renders in which the fixture was reported.
+struct ErrorSummary {
+  double mean = 0, sigma = 0, max = 0;
+};
+
 struct FixtureErrorStats {
   std::string type, program;
   int markers = 0;               ///< codes of this fixture in the scene
   int found = 0;                 ///< renders in which the fixture was reported
-  // table-constrained (or the configured) pose vs truth: mean, σ and max over the renders
-  double t_err_mean = 0, t_err_sigma = 0, t_err_max = 0;   ///< metres
-  double r_err_mean = 0, r_err_sigma = 0, r_err_max = 0;   ///< radians
-  // free 6-DoF (ViSP) averaged over the fixture's codes
-  double free_t_err_mean = 0, free_t_err_sigma = 0, free_r_err_mean = 0, free_r_err_sigma = 0;
-  // free 6-DoF of the first code alone
-  double single_t_err_mean = 0, single_r_err_mean = 0;
-  double sigma_translation_reported = 0;  ///< the node's own 1σ estimate (mean over renders)
+  ErrorSummary t_err, r_err;     ///< the reported (table-constrained or configured) UCS vs truth: m, rad
+  ErrorSummary free_t_err, free_r_err;      ///< free 6-DoF (ViSP) averaged over the fixture's codes
+  ErrorSummary single_t_err, single_r_err;  ///< free 6-DoF of the fixture's first code alone
+  ErrorSummary reported_sigma;   ///< the node's own 1σ of the UCS origin, m
 };
 
 struct FixtureSimConfig {
