@@ -27,6 +27,9 @@ PACKAGES=(
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libembree-dev libtbb-dev
   libqrencode-dev libzbar-dev libvisp-dev libpcl-dev libpcl-conversions-dev libopen3d-dev
   libcli11-dev gnuplot-nox libassimp-dev liborocos-kdl-dev
+  # planning: the arm's URDF and kinematics, the collision map, collision checks, paths; rviz's robot
+  liburdfdom-dev libkdl-parser-dev liboctomap-dev libfcl-dev libompl-dev libtrajectory-msgs-dev ros-trajectory-msgs
+  ros-robot-state-publisher
   # headless rviz screenshots
   xvfb x11-utils imagemagick libgl1-mesa-dri mesa-utils
   # the two-PC test: roslaunch reaches the second "PC" by ssh

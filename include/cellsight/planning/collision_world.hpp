@@ -1,0 +1,82 @@
+// The cell as the planner avoids it: the table as a box, every located part as its model mesh at
+// the located pose, and whatever else the scan saw (unknown objects, parts not found) as an
+// OctoMap of the scan points that no located part explains. Collision checks with FCL for the
+// arm's link shapes, the gripper's fingers and a carried part; self-collision of the tool and the
+// carried part against the base, column and upper arm. FCL and OctoMap stay behind the pimpl.
+#pragma once
+#include <Eigen/Geometry>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cellsight/common/mesh.hpp"
+#include "cellsight/planning/arm_model.hpp"
+
+namespace cellsight {
+
+struct CollisionWorldConfig {
+  double octree_resolution = 0.004;  ///< m, voxel edge of the unexplained scan points
+  double table_margin = 0.003;       ///< m: scan points lower than table z + this are the table
+  double explained_margin = 0.004;   ///< m: scan points this close to a located part are that part
+  double padding = 0.002;            ///< m added around the arm's and gripper's shapes
+  /// m: the carried part may sink this far into the table and into the object it is inserted
+  /// into (the parts rest on the table; insertion is contact) without counting as a collision
+  double contact_allowance = 0.002;
+  int min_voxel_points = 2;          ///< scan points needed before a voxel counts as occupied
+};
+
+/// What collides with what (empty when nothing does).
+struct CollisionReport {
+  bool collides = false;
+  std::string first;   ///< e.g. "finger_left" or "carried part"
+  std::string second;  ///< e.g. "scan voxels", "table", "object housing", "link_1"
+  std::string text() const { return collides ? first + " vs " + second : "free"; }
+};
+
+/// A part held in the gripper: its mesh and its pose in the tcp frame.
+struct CarriedPart {
+  std::shared_ptr<const TriangleMesh> mesh;
+  Eigen::Isometry3d T_tcp_part = Eigen::Isometry3d::Identity();
+  std::string name;
+};
+
+class CollisionWorld {
+ public:
+  /// The table: its top at `table_z`, `table_size` (x, y) around `table_center`.
+  CollisionWorld(const CollisionWorldConfig& config, double table_z, const Eigen::Vector2d& table_center,
+                 const Eigen::Vector2d& table_size);
+  ~CollisionWorld();
+  CollisionWorld(const CollisionWorld&);  ///< deep enough: obstacles are shared read-only
+  CollisionWorld& operator=(const CollisionWorld&) = delete;
+
+  /// A located part as an obstacle; returns its id. Throws std::invalid_argument on an empty mesh.
+  int addObject(const std::string& name, std::shared_ptr<const TriangleMesh> mesh, const Eigen::Isometry3d& pose);
+  void removeObject(int id);
+  /// Moves an object (a part placed elsewhere).
+  void moveObject(int id, const Eigen::Isometry3d& pose);
+  bool hasObject(int id) const;
+  /// Builds the OctoMap from the scan points that no object explains and that lie above the
+  /// table; non-finite points are skipped. Returns the number of occupied voxels.
+  size_t setScan(const std::vector<Eigen::Vector3f>& points);
+  size_t occupiedVoxels() const;
+  /// Occupied voxel centres (for markers).
+  std::vector<Eigen::Vector3d> voxelCentres() const;
+  double voxelSize() const { return config_.octree_resolution; }
+
+  /// The arm at q with the jaws `opening` apart, optionally carrying a part. `ignore_object`:
+  /// an object the carried part may touch (the one it is inserted into); −1 for none.
+  CollisionReport check(const ArmModel& arm, const JointVector& q, double opening, const CarriedPart* carried = nullptr,
+                        int ignore_object = -1) const;
+  /// Counts of the narrow-phase checks done (for benchmarks).
+  long long checks() const { return checks_; }
+
+  const CollisionWorldConfig& config() const { return config_; }
+
+ private:
+  CollisionWorldConfig config_;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  mutable long long checks_ = 0;
+};
+
+}  // namespace cellsight

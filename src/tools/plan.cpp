@@ -1,0 +1,253 @@
+// cellsight_plan: grasp and assembly planning figures (docs/planning.md).
+// Usage: cellsight_plan SUBCOMMAND [OPTIONS]   (--help on the tool and each subcommand)
+//   cycles   full cell cycles in-process (scan, locate, plan, execute with the robot as built):
+//            placement error against the simulator's truth, planning times; exit 3 when a limit fails
+//   reach    reachability of the table area for the gripper pointing down (and tilted)
+// Failures print "error: ..." and exit 1; bad options are reported by CLI11.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <numeric>
+
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/eval/planning_eval.hpp"
+#include "cellsight/sim/scene.hpp"
+#include "cli_args.hpp"
+
+using namespace cellsight;
+using json = nlohmann::json;
+
+namespace {
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+double stddev(const std::vector<double>& v) {
+  if (v.size() < 2) return 0;
+  const double m = std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
+  double s = 0;
+  for (double x : v) s += (x - m) * (x - m);
+  return std::sqrt(s / static_cast<double>(v.size() - 1));
+}
+
+void writeJson(const std::string& path, const json& j) {
+  if (!path.empty()) writeFileAtomic(path, j.dump(2) + "\n");
+}
+
+struct CyclesOptions {
+  std::string root = ".", scene = "config/scenes/demo.yaml", calibration, json_path;
+  int cycles = 20;
+  long first_seed = 1;
+  double limit_sigma_mm = 0, limit_sigma_deg = 0, limit_median_plan_ms = 0, limit_success = 0;
+  bool exact_robot = false, true_poses = false;
+  std::string trajectory = "demo_sweep";
+};
+
+int runCycles(const CyclesOptions& o) {
+  PlanningEvalConfig cfg;
+  cfg.root = o.root;
+  cfg.scene = o.scene;
+  cfg.calibration = o.calibration;
+  cfg.exact_robot = o.exact_robot;
+  cfg.trajectory = o.trajectory;
+  cfg.true_poses = o.true_poses;
+  PlanningEvaluation ev(cfg);
+  json out = {{"scene", o.scene},
+              {"exact_robot", o.exact_robot},
+              {"trajectory", o.trajectory},
+              {"true_poses", o.true_poses},
+              {"calibration", o.calibration.empty() ? "the simulator's true calibration (not the system's figure)" : o.calibration},
+              {"cycles", json::array()}};
+  std::map<std::string, std::vector<Eigen::Vector3d>> offsets, rotations;
+  std::map<std::string, std::vector<double>> terr, rerr;
+  std::vector<double> plan_ms;
+  int attempted = 0, placed = 0;
+  for (int c = 0; c < o.cycles; ++c) {
+    const uint64_t seed = static_cast<uint64_t>(o.first_seed + c);
+    const CycleReport r = ev.run(seed);
+    json cj = {{"seed", seed},           {"scan_points", r.scan_points},     {"located", r.located},
+               {"voxels", r.voxels},     {"scan_seconds", r.scan_seconds},   {"locate_seconds", r.locate_seconds},
+               {"world_seconds", r.world_seconds}, {"plan_seconds", r.plan_seconds}, {"placements", json::array()}};
+    cj["locate_errors"] = json::object();
+    for (const auto& [name, e] : r.locate_errors) cj["locate_errors"][name] = {{"t_err_mm", e.first}, {"r_err_deg", e.second}};
+    int ok = 0;
+    for (const PlacementResult& p : r.placements) {
+      json pj = {{"name", p.name},         {"model", p.model},       {"status", p.status},
+                 {"reason", p.reason},     {"truth", p.truth},       {"plan_seconds", p.plan_seconds},
+                 {"sampled", p.sampled},   {"candidates_tried", p.candidates_tried}};
+      ++attempted;
+      plan_ms.push_back(p.plan_seconds * 1e3);
+      if (p.status == "ok" && p.executed) {
+        ++placed;
+        ++ok;
+        pj["place_t_err_mm"] = p.place_t_err_mm;
+        pj["place_r_err_deg"] = p.place_r_err_deg;
+        pj["offset_mm"] = {p.offset_mm.x(), p.offset_mm.y(), p.offset_mm.z()};
+        pj["rotation_deg"] = {p.rotation_deg.x(), p.rotation_deg.y(), p.rotation_deg.z()};
+        pj["motion_seconds"] = p.motion_seconds;
+        offsets[p.model].push_back(p.offset_mm);
+        rotations[p.model].push_back(p.rotation_deg);
+        terr[p.model].push_back(p.place_t_err_mm);
+        rerr[p.model].push_back(p.place_r_err_deg);
+      }
+      cj["placements"].push_back(pj);
+    }
+    out["cycles"].push_back(cj);
+    std::printf("cycle %d (seed %llu): %zu located, %d placed of %zu, scan %.1f s, locate %.2f s, plan %.0f ms\n", c + 1,
+                static_cast<unsigned long long>(seed), r.located, ok, r.placements.size(), r.scan_seconds,
+                r.locate_seconds, r.plan_seconds * 1e3);
+    std::fflush(stdout);
+  }
+  json parts = json::object();
+  double worst_sigma_mm = 0, worst_sigma_deg = 0;
+  for (const auto& [model, offs] : offsets) {
+    Eigen::Vector3d sd_t, sd_r, mean_t = Eigen::Vector3d::Zero();
+    for (int a = 0; a < 3; ++a) {
+      std::vector<double> t, r;
+      for (size_t i = 0; i < offs.size(); ++i) {
+        t.push_back(offs[i][a]);
+        r.push_back(rotations[model][i][a]);
+        mean_t[a] += offs[i][a] / static_cast<double>(offs.size());
+      }
+      sd_t[a] = stddev(t);
+      sd_r[a] = stddev(r);
+    }
+    worst_sigma_mm = std::max(worst_sigma_mm, sd_t.maxCoeff());
+    worst_sigma_deg = std::max(worst_sigma_deg, sd_r.maxCoeff());
+    parts[model] = {{"placements", offs.size()},
+                    {"sigma_mm", {sd_t.x(), sd_t.y(), sd_t.z()}},
+                    {"sigma_deg", {sd_r.x(), sd_r.y(), sd_r.z()}},
+                    {"mean_offset_mm", {mean_t.x(), mean_t.y(), mean_t.z()}},
+                    {"median_t_err_mm", median(terr[model])},
+                    {"max_t_err_mm", *std::max_element(terr[model].begin(), terr[model].end())},
+                    {"median_r_err_deg", median(rerr[model])},
+                    {"max_r_err_deg", *std::max_element(rerr[model].begin(), rerr[model].end())}};
+  }
+  out["parts"] = parts;
+  out["placed"] = placed;
+  out["attempted"] = attempted;
+  out["success_rate"] = attempted ? static_cast<double>(placed) / attempted : 0.0;
+  out["worst_sigma_mm"] = worst_sigma_mm;
+  out["worst_sigma_deg"] = worst_sigma_deg;
+  out["median_plan_ms"] = median(plan_ms);
+  out["max_plan_ms"] = plan_ms.empty() ? 0.0 : *std::max_element(plan_ms.begin(), plan_ms.end());
+  out["sigma_note"] = "sample standard deviation over the cycles of the placed centroid (per base axis) and of the "
+                      "rotation vector (per axis, symmetry removed), per model; worst_* = the largest over models and axes";
+  json failed = json::array();
+  char buf[200];
+  if (o.limit_sigma_mm > 0 && worst_sigma_mm > o.limit_sigma_mm) {
+    std::snprintf(buf, sizeof buf, "placement sigma %.3f mm > %.3f mm", worst_sigma_mm, o.limit_sigma_mm);
+    failed.push_back(buf);
+  }
+  if (o.limit_sigma_deg > 0 && worst_sigma_deg > o.limit_sigma_deg) {
+    std::snprintf(buf, sizeof buf, "placement sigma %.4f deg > %.4f deg", worst_sigma_deg, o.limit_sigma_deg);
+    failed.push_back(buf);
+  }
+  if (o.limit_median_plan_ms > 0 && median(plan_ms) > o.limit_median_plan_ms) {
+    std::snprintf(buf, sizeof buf, "median planning time %.1f ms > %.1f ms", median(plan_ms), o.limit_median_plan_ms);
+    failed.push_back(buf);
+  }
+  if (o.limit_success > 0 && out["success_rate"].get<double>() < o.limit_success) {
+    std::snprintf(buf, sizeof buf, "placed %d of %d < %.3f", placed, attempted, o.limit_success);
+    failed.push_back(buf);
+  }
+  out["limits_failed"] = failed;
+  writeJson(o.json_path, out);
+  std::printf("cycles: %d, placed %d/%d, worst sigma %.3f mm %.4f deg, median plan %.1f ms (max %.1f)\n", o.cycles, placed,
+              attempted, worst_sigma_mm, worst_sigma_deg, median(plan_ms), out["max_plan_ms"].get<double>());
+  for (const auto& f : failed) std::printf("LIMIT FAILED: %s\n", f.get<std::string>().c_str());
+  return failed.empty() ? 0 : 3;
+}
+
+struct ReachOptions {
+  std::string root = ".", scene = "config/scenes/demo.yaml", json_path;
+  double step = 0.05;
+};
+
+int runReach(const ReachOptions& o) {
+  const Scene scene = loadScene(o.scene[0] == '/' ? o.scene : o.root + "/" + o.scene);
+  const ArmModel arm = ArmModel::fromUrdfFile(o.root + "/urdf/cellsight_arm.urdf");
+  const AssemblyConfig as = loadAssemblyConfig(o.root + "/config/assembly.yaml");
+  const Eigen::Isometry3d tcp_tool0 = arm.toolTcp().inverse();
+  json rows = json::array();
+  for (double tilt_deg : {0.0, 30.0, 60.0}) {
+    for (double h : {0.01, 0.05, 0.10}) {
+      int total = 0, ok = 0;
+      for (double x = scene.table.center.x() - scene.table.size.x() / 2 + o.step / 2;
+           x < scene.table.center.x() + scene.table.size.x() / 2; x += o.step) {
+        for (double y = scene.table.center.y() - scene.table.size.y() / 2 + o.step / 2;
+             y < scene.table.center.y() + scene.table.size.y() / 2; y += o.step) {
+          // the tool pointing down, tilted about the tool's y; jaws at 0 and 90 deg; any of them counts
+          bool any = false;
+          for (double yaw : {0.0, M_PI / 2, M_PI, -M_PI / 2}) {
+            Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+            T.translation() = Eigen::Vector3d(x, y, scene.table.z + h);
+            T.linear() = (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()) *
+                          Eigen::AngleAxisd(tilt_deg * M_PI / 180, Eigen::Vector3d::UnitY()))
+                             .toRotationMatrix();
+            if (arm.ik(T * tcp_tool0, as.home)) {
+              any = true;
+              break;
+            }
+          }
+          ++total;
+          ok += any;
+        }
+      }
+      rows.push_back({{"tilt_deg", tilt_deg}, {"tcp_height_m", h}, {"cells", total}, {"reachable", ok},
+                      {"share", total ? static_cast<double>(ok) / total : 0.0}});
+      std::printf("tilt %2.0f deg, tcp %.2f m above the table: %d of %d cells reachable (%.0f %%)\n", tilt_deg, h, ok, total,
+                  100.0 * ok / std::max(1, total));
+    }
+  }
+  json out = {{"scene", o.scene}, {"grid_step_m", o.step}, {"table_center", {scene.table.center.x(), scene.table.center.y()}},
+              {"table_size", {scene.table.size.x(), scene.table.size.y()}}, {"rows", rows}};
+  writeJson(o.json_path, out);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app("Grasp and assembly planning figures: full cell cycles against the simulator's truth, reachability.",
+               "cellsight_plan");
+  app.require_subcommand(1);
+  CyclesOptions co;
+  auto* cycles = app.add_subcommand("cycles", "full cell cycles in-process: scan, locate, plan, execute; placement error vs the truth");
+  cycles->add_option("--root", co.root, "the package folder (config/, urdf/)")->capture_default_str();
+  cycles->add_option("--scene", co.scene, "scene file (relative to --root unless absolute)")->capture_default_str();
+  cycles->add_option("--calibration", co.calibration,
+                     "calibration folder the scanner uses (the user's cell's); without it, the simulator's truth");
+  cycles->add_option("--cycles", co.cycles, "cycles, each with fresh image noise and robot scatter")
+      ->check(cellsight_tools::positiveInt())->capture_default_str();
+  cycles->add_option("--first-seed", co.first_seed, "noise seed of the first cycle")->check(cellsight_tools::nonNegativeInt())
+      ->capture_default_str();
+  cycles->add_option("--json", co.json_path, "write the figures here");
+  cycles->add_option("--trajectory", co.trajectory, "the scan's trajectory (config/trajectories.yaml)")->capture_default_str();
+  cycles->add_option("--limit-sigma-mm", co.limit_sigma_mm, "exit 3 when a placement sigma exceeds this (mm)")
+      ->check(cellsight_tools::nonNegative());
+  cycles->add_option("--limit-sigma-deg", co.limit_sigma_deg, "exit 3 when a rotation sigma exceeds this (deg)")
+      ->check(cellsight_tools::nonNegative());
+  cycles->add_option("--limit-median-plan-ms", co.limit_median_plan_ms, "exit 3 when the median planning time per part exceeds this")
+      ->check(cellsight_tools::nonNegative());
+  cycles->add_option("--limit-success", co.limit_success, "exit 3 when fewer placements than this share succeed")
+      ->check(cellsight_tools::fraction());
+  cycles->add_flag("--exact-robot", co.exact_robot,
+                   "error budget: execute with a robot without kinematic error (the scan still uses the real one)");
+  cycles->add_flag("--true-poses", co.true_poses, "error budget: plan on the true part poses instead of the located ones");
+  ReachOptions ro;
+  auto* reach = app.add_subcommand("reach", "reachability of the table for the tool pointing down and tilted");
+  reach->add_option("--root", ro.root, "the package folder")->capture_default_str();
+  reach->add_option("--scene", ro.scene, "scene file (its table)")->capture_default_str();
+  reach->add_option("--step", ro.step, "grid step (m)")->check(cellsight_tools::positive())->capture_default_str();
+  reach->add_option("--json", ro.json_path, "write the table here");
+  if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
+  return cellsight_tools::runTool([&] {
+    if (cycles->parsed()) return runCycles(co);
+    return runReach(ro);
+  });
+}
