@@ -5,7 +5,8 @@
 # calibration made: the pipeline reads only this), calibration_three_point/ (the thesis's method,
 # beside it), images/ (captured frames), frames.json, truth/ (ground truth + true calibration,
 # for the evaluation only), raw.bag (images, camera_info, tf, I/O), scan.ply, scanner.json,
-# detections.json, error_budget.json, rviz.png, report.json, image_bytes.json.
+# detections.json, error_budget.json, rviz.png, report.json, report.md, image_bytes.json, plans_raw.json
+# (every grasp plan), assembly.json (assembly_client's steps), placements.json (placed vs target).
 # Usage: scripts/demo.sh [build folder] [out folder]   (DEMO_LAUNCH_ARGS="nodelets:=false" adds launch args)
 set -euo pipefail
 BUILD=${1:-_build}
@@ -58,7 +59,8 @@ echo "demo: calibrated the cell in $(/usr/bin/python3 -c "print(round($tc1 - $tc
 start_xvfb
 echo "demo: simulated cell on $ROS_MASTER_URI, display $DISPLAY, output in $OUT"
 t3=$(now)
-roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$OUT" calibration_dir:="$CAL" rviz:=true ${DEMO_LAUNCH_ARGS:-} \
+roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$OUT" calibration_dir:="$CAL" rviz:=true assembly:=true \
+  ${DEMO_LAUNCH_ARGS:-} \
   >"$OUT/launch.log" 2>&1 &
 LAUNCH_PID=$!
 
@@ -102,6 +104,17 @@ if ! "$TOOLS/cellsight_robot_client" --port "$BRIDGE_PORT" --json "$OUT/robot_se
   echo "demo: FAILED: the simulated controller's session with robot_bridge: $(tail -1 "$OUT/logs/robot_session.log")" >&2
   exit 1
 fi
+# the assembly: assembly_client plans every part with grasp_planner and the simulated robot executes it
+deadline=$(( $(date +%s) + 300 ))
+until /usr/bin/python3 -c 'import json,sys; sys.exit(0 if json.load(open(sys.argv[1])).get("done") else 1)' "$OUT/assembly.json" 2>/dev/null; do
+  if grep -qE "assembly_client.*(has died|has finished)|(grasp_planner|cell_sim).*has died" "$OUT/launch.log" || [ "$(date +%s)" -gt "$deadline" ]; then
+    echo "demo: FAILED: the assembly did not complete; see $OUT/launch.log" >&2
+    grep -E "assembly_client|grasp_planner" "$OUT/launch.log" | tail -5 >&2 || true
+    exit 1
+  fi
+  sleep 0.5
+done
+t_asm=$(now)
 sleep 3  # let rviz draw the last frame
 screenshot "$OUT/rviz.png"
 # What the 2 MP frames cost between processes (nodelets pass them by pointer inside the manager).
@@ -172,13 +185,16 @@ run_step fixtures_compare "$TOOLS/cellsight_qr_fixtures" compare --fixtures "$OU
   --registry config/fixtures.yaml --json "$OUT/fixtures.json"
 run_step fixtures_sim "$TOOLS/cellsight_qr_fixtures" sim --scene "$SCENE" --registry config/fixtures.yaml \
   --calibration "$CAL" --renders 100 --json "$OUT/fixtures_renders.json"
+# the assembly: where the simulator's truth says each part was put down, against its target
+run_step placements "$TOOLS/cellsight_plan" demo --scene "$SCENE" --assembly "$OUT/assembly.json" \
+  --truth "$OUT/truth/placements.jsonl" --json "$OUT/placements.json"
 t6=$(now)
 
-/usr/bin/python3 - "$OUT" "$t0" "$t1" "$t2" "$t3" "$t4" "$t5" "$t6" "$tc0" "$tc1" <<'PY'
+/usr/bin/python3 - "$OUT" "$t0" "$t1" "$t2" "$t3" "$t4" "$t5" "$t6" "$tc0" "$tc1" "$t_asm" <<'PY'
 import json, os, sys, subprocess
 import rosbag
 out = sys.argv[1]
-t0, t1, t2, t3, t4, t5, t6, tc0, tc1 = map(float, sys.argv[2:11])
+t0, t1, t2, t3, t4, t5, t6, tc0, tc1, t_asm = map(float, sys.argv[2:12])
 
 def write_json(name, obj):
     tmp = os.path.join(out, name + ".tmp")
@@ -256,7 +272,8 @@ sd = subprocess.run(["/usr/bin/convert", os.path.join(out, "rviz.png"), "-colors
 report = {
     "what_ran": ["cellsight_simulate_captures", "cellsight_calibrate (intrinsics, extrinsics, laser lsq and three_point)",
                  "cell_sim", "calibration_publisher", "laser_plane_tracker", "triangulation", "clustering", "model_matching",
-                 "camera_trigger (Scan action)", "scan_client", "rosbag record", "rviz (Xvfb)",
+                 "camera_trigger (Scan action)", "scan_client", "grasp_planner", "robot_state_publisher", "assembly_client",
+                 "rosbag record", "rviz (Xvfb)",
                  "cellsight_scanner_accuracy scan"],
     "scene": "config/scenes/demo.yaml",
     "trajectory": frames["trajectory"],
@@ -285,6 +302,21 @@ if clusters:
 if os.path.exists(det_path):
     det = json.load(open(det_path))
     report["localization"] = {k: det[k] for k in ("tp", "fp", "fn", "median_t_err_mm", "median_r_err_deg", "locate_seconds")}
+pl = json.load(open(os.path.join(out, "placements.json")))
+report["placements"] = [{k: p.get(k) for k in ("object", "model", "status", "reason", "place_t_err_mm", "place_r_err_deg",
+                                               "plan_seconds", "motion_seconds", "truth")} for p in pl["placements"]]
+plan_s = sum(p["plan_seconds"] for p in pl["placements"])
+exec_s = sum(p.get("motion_seconds") or 0.0 for p in pl["placements"])
+report["cycle_seconds"] = {
+    "calibration": round(tc1 - tc0, 2),
+    "scan": round(scan["scan_seconds"], 2),
+    "locate": round(report.get("localization", {}).get("locate_seconds", 0.0), 3),
+    "plan": round(plan_s, 3),
+    "execute": round(exec_s, 2),
+    "assembly_wall": round(t_asm - t4, 2),
+    "note": "scan: the Scan action; locate: model_matching; plan: grasp_planner per part, summed; execute: the simulated "
+            "robot's motion (assembly_time_scale x faster than planned); assembly_wall: scan done to assembly done",
+}
 ib_path = os.path.join(out, "image_bytes.json")
 if os.path.exists(ib_path):
     ib = json.load(open(ib_path))
@@ -292,7 +324,30 @@ if os.path.exists(ib_path):
                                  "subscribers": ib.get("subscribers"),
                                  "publishers": ib.get("publishers")}
 write_json("report.json", report)
-print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds", "clustering", "localization") if k in report}, indent=1))
+# the readable report
+lines = ["# cellsight demo cell cycle", "",
+         "Simulated cell `%s`, self-calibrated (`calibration/`), scanned along `%s` (%d frames), located, planned and "
+         "assembled by the simulated robot. Figures against the simulator's truth." % (report["scene"], report["trajectory"], report["frames"]),
+         "", "![rviz: the robot, the OctoMap of the scan, the last path](rviz.png)", "",
+         "## Cycle", "", "| stage | seconds |", "|---|---|"]
+for k in ("calibration", "scan", "locate", "plan", "execute", "assembly_wall"):
+    lines.append("| %s | %s |" % (k, report["cycle_seconds"][k]))
+lines += ["", "## Scanner", "", "surface error RMS %.4f mm, max %.4f mm over %d points" % (
+    scanner["surface_error_rms_mm"], scanner["surface_error_max_mm"], scanner["points"])]
+if "localization" in report:
+    loc = report["localization"]
+    lines += ["", "## Localisation", "", "%d found, %d missed, %d false; median %.3f mm, %.3f deg from the truth" % (
+        loc["tp"], loc["fn"], loc["fp"], loc["median_t_err_mm"], loc["median_r_err_deg"])]
+lines += ["", "## Placements", "", "| part | status | placed vs target | plan | motion |", "|---|---|---|---|---|"]
+for p in report["placements"]:
+    err = ("%.3f mm, %.3f deg" % (p["place_t_err_mm"], p["place_r_err_deg"])) if p.get("place_t_err_mm") is not None else p.get("reason", "")
+    lines.append("| %s (%s) | %s | %s | %.0f ms | %s |" % (p["object"], p["model"], p["status"], err, p["plan_seconds"] * 1e3,
+                                                       ("%.1f s" % p["motion_seconds"]) if p.get("motion_seconds") else "-"))
+with open(os.path.join(out, "report.md.tmp"), "w") as f:
+    f.write("\n".join(lines) + "\n")
+os.replace(os.path.join(out, "report.md.tmp"), os.path.join(out, "report.md"))
+print(json.dumps({k: report[k] for k in ("frames", "frames_planned", "scan_seconds", "seconds", "clustering", "localization",
+                                         "cycle_seconds", "placements") if k in report}, indent=1))
 print(json.dumps({k: v for k, v in scanner.items() if k not in ("notes", "sphere_in_scan")}, indent=1))
 print(json.dumps({"error_budget_surface_rms_mm": budget["scanner_surface_rms_mm"]}, indent=1))
 missing = [t for t in ("/scanner_camera/image_raw", "/scanner_camera/camera_info", "/tf", "/tf_static") if t not in topics]

@@ -16,7 +16,9 @@
 #include "cellsight/common/camera_model.hpp"
 #include "cellsight/common/plane.hpp"
 #include "cellsight/common/scan_cloud.hpp"
+#include "cellsight/GraspPlan.h"
 #include "cellsight/LaserPlaneStamped.h"
+#include "cellsight/planning/grasp_planner.hpp"
 
 namespace cellsight_ros {
 
@@ -54,5 +56,16 @@ cellsight::ScanCloud fromCloudMsg(const sensor_msgs::PointCloud2& msg, size_t* d
 
 int64_t toNanoseconds(const ros::Time& t);
 ros::Time fromNanoseconds(int64_t ns);
+
+/// A planner result as a GraspPlan (trajectory with the arm's joint names, times from `stamp`).
+cellsight::GraspPlan toGraspPlanMsg(const cellsight::PartPlan& plan, const std::array<std::string, 6>& joint_names,
+                                    const std::string& frame, const ros::Time& stamp);
+/// GraspPlan.status of a planner status.
+uint8_t toPlanStatus(cellsight::PlanStatus s);
+/// A JointTrajectory as positions and times in the arm's joint order. Throws std::invalid_argument
+/// naming the problem: no points, joint names that are not the arm's six, a point without six
+/// finite positions, times not strictly increasing.
+cellsight::TimedTrajectory fromTrajectoryMsg(const trajectory_msgs::JointTrajectory& msg,
+                                             const std::array<std::string, 6>& joint_names);
 
 }  // namespace cellsight_ros

@@ -170,7 +170,7 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
     size_t idx = parts.size();
     const PartPlan plan = m.planner->planNext(q, &idx);
     rep.plan_seconds += plan.seconds;
-    if (idx >= parts.size()) break;
+    if (idx >= parts.size() || plan.status == PlanStatus::kNothingLeft) break;
     PlacementResult pr;
     pr.name = parts[idx].name;
     pr.model = parts[idx].model;

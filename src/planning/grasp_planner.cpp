@@ -30,6 +30,7 @@ const char* planStatusName(PlanStatus s) {
     case PlanStatus::kUnreachable: return "unreachable";
     case PlanStatus::kNoPath: return "no_path";
     case PlanStatus::kBadInput: return "bad_input";
+    case PlanStatus::kNothingLeft: return "nothing_left";
   }
   return "?";
 }
@@ -296,14 +297,17 @@ PartPlan GraspPlanner::planNext(const JointVector& start, size_t* index) const {
   PartPlan first_refusal;
   bool have_refusal = false;
   size_t refused = parts_.size();
+  std::vector<std::string> passed_over;
   for (const std::string& model : assembly_.order) {
     for (size_t i = 0; i < parts_.size(); ++i) {
       if (parts_[i].model != model || placed_.count(i) || skipped_.count(i)) continue;
       PartPlan p = plan(i, start);
       if (p.status == PlanStatus::kOk) {
         if (index) *index = i;
+        p.passed_over = passed_over;
         return p;
       }
+      passed_over.push_back(parts_[i].name + ": " + planStatusName(p.status) + ": " + p.reason);
       if (!have_refusal) {
         first_refusal = p;
         have_refusal = true;
@@ -312,8 +316,9 @@ PartPlan GraspPlanner::planNext(const JointVector& start, size_t* index) const {
     }
   }
   if (index) *index = refused;
+  first_refusal.passed_over = passed_over;
   if (!have_refusal) {
-    first_refusal.status = PlanStatus::kBadInput;
+    first_refusal.status = PlanStatus::kNothingLeft;
     first_refusal.reason = "no part of the assembly is left to place";
   }
   return first_refusal;

@@ -1,8 +1,12 @@
 // cell_sim: the built-in simulated robot cell. Publishes what real drivers publish (scanner and
-// fixture camera images + camera_info, base_link→flange in tf), simulates the robot's motion and
-// the two-signal stop-and-go handshake (docs/interfaces.md), and writes the ground truth.
+// fixture camera images + camera_info, base_link→flange in tf, joint_states of the arm when
+// /robot_description holds its URDF), simulates the robot's motion and the two-signal stop-and-go
+// handshake (docs/interfaces.md), executes grasp plans (robot/execute_plan: the part between the
+// jaws rides with the gripper as built, and the cell is rendered with it where it was put down),
+// and writes the ground truth.
 #include <geometry_msgs/TransformStamped.h>
 #include <image_transport/image_transport.h>
+#include <sensor_msgs/JointState.h>
 #include <ros/ros.h>
 #include <std_msgs/Bool.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -16,7 +20,10 @@
 #include <memory>
 #include <mutex>
 
+#include "cellsight/ExecutePlan.h"
 #include "cellsight/MoveFlange.h"
+#include "cellsight/common/raycaster.hpp"
+#include "cellsight/planning/arm_model.hpp"
 #include "cellsight/sim/ground_truth.hpp"
 #include "cellsight/sim/robot_model.hpp"
 #include "cellsight/sim/renderer.hpp"
@@ -28,6 +35,7 @@
 
 namespace {
 
+using cellsight::ExecutePlan;
 using cellsight::MoveFlange;
 
 class CellSim {
@@ -57,8 +65,8 @@ class CellSim {
 
     const auto t0 = std::chrono::steady_clock::now();
     geometry_ = std::make_shared<cellsight::CellGeometry>(scene);
-    scanner_ = std::make_unique<cellsight::ScannerRenderer>(geometry_);
-    fixture_ = std::make_unique<cellsight::FixtureRenderer>(geometry_);
+    scanner_ = std::make_shared<cellsight::ScannerRenderer>(geometry_);
+    fixture_ = std::make_shared<cellsight::FixtureRenderer>(geometry_);
     ROS_INFO("cell_sim: scene '%s' (%zu objects, %zu fixtures) ready in %.2f s",
              scene.name.c_str(), scene.objects.size(), scene.fixtures.size(),
              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
@@ -80,10 +88,24 @@ class CellSim {
                "(joint offsets %.3f deg, links %.2f mm, repeatability %.3f mm)", s.as_built.robot.joint_offset_deg,
                s.as_built.robot.link_mm, s.as_built.robot.repeatability_mm);
     pose_ = s.robot.home;
+    // the arm's joints (for robot_state_publisher and grasp plans) when its URDF is loaded
+    std::string urdf;
+    if (nh.getParam("robot_description", urdf) && !urdf.empty()) {
+      arm_ = std::make_unique<cellsight::ArmModel>(cellsight::ArmModel::fromUrdfString(urdf, nh.resolveName("robot_description")));
+      const auto q = arm_->ik(pose_, (cellsight::JointVector() << 0.0, 0.5, 0.64, 0.0, 0.43, 0.0).finished());
+      if (!q) throw std::runtime_error("the robot's home pose has no inverse kinematics within the URDF's joint limits");
+      q_ = *q;
+      joints_pub_ = nh.advertise<sensor_msgs::JointState>("joint_states", 10);
+      execute_srv_ = nh.advertiseService("robot/execute_plan", &CellSim::onExecute, this);
+    } else {
+      ROS_INFO("cell_sim: no %s: no joint_states, no robot/execute_plan", nh.resolveName("robot_description").c_str());
+    }
     if (!truth_dir_.empty()) {
       cellsight::writeSceneTruth(s, truth_dir_);
       frames_truth_.open(truth_dir_ + "/frames_truth.jsonl", std::ios::app);
       if (!frames_truth_) throw std::runtime_error(truth_dir_ + "/frames_truth.jsonl: cannot open");
+      placements_truth_.open(truth_dir_ + "/placements.jsonl", std::ios::app);
+      if (!placements_truth_) throw std::runtime_error(truth_dir_ + "/placements.jsonl: cannot open");
       ROS_INFO("cell_sim: ground truth and true calibration written to %s", truth_dir_.c_str());
     } else {
       ROS_WARN("cell_sim: ~truth_dir is empty: no ground truth is written");
@@ -133,7 +155,7 @@ class CellSim {
       res.message = e.what();
       return true;
     }
-    if (moving_) {
+    if (moving_ || executing_) {
       res.status = MoveFlange::Response::REJECTED_BUSY;
       res.message = "robot is still moving";
       return true;
@@ -197,7 +219,13 @@ class CellSim {
         arrived = true;
       }
     }
+    if (executing_) {
+      lock.unlock();
+      stepExecution(now);
+      lock.lock();
+    }
     publishFlange(now, pose_);
+    publishJoints(now);
     if (arrived) {
       awaiting_capture_ = true;
       setInPosition(true);
@@ -207,6 +235,195 @@ class CellSim {
         capture(now);
       }
     }
+  }
+
+  bool onExecute(ExecutePlan::Request& req, ExecutePlan::Response& res) {
+    using R = ExecutePlan::Response;
+    std::lock_guard<std::mutex> lock(mutex_);
+    cellsight::TimedTrajectory traj;
+    try {
+      traj = cellsight_ros::fromTrajectoryMsg(req.plan.trajectory, arm_->jointNames());
+    } catch (const std::exception& e) {
+      res.status = R::REJECTED_INVALID;
+      res.message = e.what();
+      return true;
+    }
+    const size_t n = traj.positions.size();
+    if (req.plan.grasp_index >= n || req.plan.release_index >= n || req.plan.grasp_index > req.plan.release_index) {
+      res.status = R::REJECTED_INVALID;
+      res.message = "grasp_index and release_index must lie in the trajectory, the grasp first";
+      return true;
+    }
+    if (!std::isfinite(req.time_scale) || req.time_scale < 0) {
+      res.status = R::REJECTED_INVALID;
+      res.message = "time_scale must be >= 0 (0: as planned)";
+      return true;
+    }
+    for (const auto& q : traj.positions) {
+      if (!arm_->withinLimits(q)) {
+        res.status = R::REJECTED_INVALID;
+        res.message = "a trajectory point lies outside the joint limits";
+        return true;
+      }
+    }
+    if (moving_ || executing_ || (handshake_ && awaiting_capture_)) {
+      res.status = R::REJECTED_BUSY;
+      res.message = moving_ || executing_ ? "robot is still moving" : "robot waits for io/capture_done";
+      return true;
+    }
+    if (cellsight::jointDistance(traj.positions.front(), q_) > 0.01) {
+      res.status = R::REJECTED_START;
+      res.message = "the trajectory starts " + std::to_string(cellsight::jointDistance(traj.positions.front(), q_)) +
+                    " rad from the robot's joints";
+      return true;
+    }
+    traj_ = traj;
+    grasp_index_ = req.plan.grasp_index;
+    release_index_ = req.plan.release_index;
+    time_scale_ = req.time_scale > 0 ? req.time_scale : 1.0;
+    exec_start_ = ros::Time::now();
+    exec_object_ = req.plan.object;
+    next_event_ = 0;
+    executing_ = true;
+    setInPosition(false);
+    res.status = R::OK;
+    res.expected_duration = traj.duration() / time_scale_;
+    res.message = "executing " + std::to_string(n) + " points";
+    return true;
+  }
+
+  /// The trajectory at `now`: joints, the reported flange, the jaws' events (mutex_ not held).
+  void stepExecution(const ros::Time& now) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const double t = (now - exec_start_).toSec() * time_scale_;
+    const auto& times = traj_.times;
+    size_t i = std::upper_bound(times.begin(), times.end(), t) - times.begin();
+    cellsight::JointVector q;
+    if (i >= times.size()) {
+      q = traj_.positions.back();
+      i = times.size();
+    } else if (i == 0) {
+      q = traj_.positions.front();
+    } else {
+      const double a = (t - times[i - 1]) / std::max(1e-9, times[i] - times[i - 1]);
+      q = traj_.positions[i - 1] + a * (traj_.positions[i] - traj_.positions[i - 1]);
+    }
+    q_ = q;
+    pose_ = arm_->fk(q);
+    // the jaws close at the grasp point and open at the release point, once each
+    const bool grasp = next_event_ == 0 && i > grasp_index_;
+    const bool release = next_event_ == 1 && i > release_index_;
+    const bool done = i >= times.size();
+    if (grasp) next_event_ = 1;
+    if (release) next_event_ = 2;
+    if (done) {
+      executing_ = false;
+      q_ = traj_.positions.back();
+      pose_ = arm_->fk(q_);
+    }
+    const cellsight::JointVector q_grasp = traj_.positions[grasp_index_], q_release = traj_.positions[release_index_];
+    lock.unlock();
+    if (grasp) closeJaws(q_grasp);
+    if (release) openJaws(q_release, now);
+    if (done) {
+      setInPosition(true);
+      ROS_INFO("cell_sim: trajectory of '%s' executed", exec_object_.c_str());
+    }
+  }
+
+  /// Where the tcp really is when the controller is at `q` (the arm as built), move number `move`.
+  Eigen::Isometry3d actualTcp(const cellsight::JointVector& q, uint64_t move) const {
+    return robot_.actual(arm_->fk(q), move) * arm_->toolTcp();
+  }
+
+  void closeJaws(const cellsight::JointVector& q) {
+    const cellsight::Scene& s = geometry_->scene();
+    const Eigen::Isometry3d tcp = actualTcp(q, 7000000ull + moves_++);
+    held_ = -1;
+    double best = 1e9;
+    for (size_t k = 0; k < s.objects.size(); ++k) {
+      // the tcp inside the part's bounding box (5 mm margin): the part is between the jaws
+      const cellsight::TriangleMesh& mesh = meshOf(s.objects[k]);
+      const Eigen::Vector3f p = (s.objects[k].T_base_object.inverse() * tcp.translation()).cast<float>();
+      Eigen::AlignedBox3f box = mesh.bounds();
+      box.min().array() -= 0.005f;
+      box.max().array() += 0.005f;
+      if (!box.contains(p)) continue;
+      const double d = (p - box.center()).norm();
+      if (d < best) {
+        best = d;
+        held_ = static_cast<int>(k);
+      }
+    }
+    if (held_ < 0) {
+      ROS_WARN("cell_sim: the jaws closed on nothing (no part at %.3f %.3f %.3f)", tcp.translation().x(), tcp.translation().y(),
+               tcp.translation().z());
+      return;
+    }
+    T_tcp_held_ = tcp.inverse() * s.objects[static_cast<size_t>(held_)].T_base_object;
+    ROS_INFO("cell_sim: the jaws closed on '%s'", s.objects[static_cast<size_t>(held_)].name.c_str());
+  }
+
+  void openJaws(const cellsight::JointVector& q, const ros::Time& stamp) {
+    if (held_ < 0) return;
+    const Eigen::Isometry3d tcp = actualTcp(q, 7000000ull + moves_++);
+    cellsight::Scene scene = geometry_->scene();
+    cellsight::SceneObject& o = scene.objects[static_cast<size_t>(held_)];
+    o.T_base_object = tcp * T_tcp_held_;
+    held_ = -1;
+    // the cell with the part where it was put down: later frames and markers show it there
+    auto geometry = std::make_shared<cellsight::CellGeometry>(scene);
+    auto scanner = std::make_shared<cellsight::ScannerRenderer>(geometry);
+    auto fixture = std::make_shared<cellsight::FixtureRenderer>(geometry);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      std::lock_guard<std::mutex> render_lock(render_mutex_);
+      geometry_ = geometry;
+      scanner_ = scanner;
+      fixture_ = fixture;
+    }
+    if (placements_truth_.is_open()) {
+      const Eigen::Vector3d t = o.T_base_object.translation();
+      const Eigen::Quaterniond r(o.T_base_object.linear());
+      char line[512];
+      std::snprintf(line, sizeof line,
+                    "{\"object\": \"%s\", \"model\": \"%s\", \"plan_object\": \"%s\", \"stamp_ns\": %lld, "
+                    "\"pose\": {\"xyz\": [%.9f, %.9f, %.9f], \"quat\": [%.12f, %.12f, %.12f, %.12f]}}\n",
+                    o.name.c_str(), o.model.c_str(), exec_object_.c_str(), static_cast<long long>(cellsight_ros::toNanoseconds(stamp)),
+                    t.x(), t.y(), t.z(), r.x(), r.y(), r.z(), r.w());
+      placements_truth_ << line;
+      placements_truth_.flush();
+    }
+    ROS_INFO("cell_sim: '%s' put down at %.4f %.4f %.4f", o.name.c_str(), o.T_base_object.translation().x(),
+             o.T_base_object.translation().y(), o.T_base_object.translation().z());
+    publishMarkers();
+  }
+
+  const cellsight::TriangleMesh& meshOf(const cellsight::SceneObject& o) {
+    auto it = meshes_.find(o.info.mesh_file);
+    if (it == meshes_.end()) it = meshes_.emplace(o.info.mesh_file, cellsight::loadValidMesh(o.info.mesh_file)).first;
+    return it->second;
+  }
+
+  void publishJoints(const ros::Time& stamp) {
+    if (!arm_) return;
+    if (!executing_) {
+      // the joints of the reported flange pose (the branch of the last joints)
+      const auto q = arm_->ik(pose_, q_);
+      if (q) q_ = *q;
+    }
+    sensor_msgs::JointState js;
+    js.header.stamp = stamp;
+    for (int j = 0; j < 6; ++j) {
+      js.name.push_back(arm_->jointNames()[static_cast<size_t>(j)]);
+      js.position.push_back(q_[j]);
+    }
+    // the jaws: open, or closed on the part
+    js.name.push_back("finger_right_joint");
+    js.position.push_back(held_ >= 0 ? 0.01 : 0.035);
+    js.name.push_back("finger_left_joint");
+    js.position.push_back(held_ >= 0 ? 0.01 : 0.035);
+    joints_pub_.publish(js);
   }
 
   void publishFlange(const ros::Time& stamp, const Eigen::Isometry3d& pose) {
@@ -230,7 +447,12 @@ class CellSim {
       pose = poseAt(stamp);
       publishFlange(stamp, pose);
     }
-    const cellsight::Scene& s = geometry_->scene();
+    std::shared_ptr<const cellsight::ScannerRenderer> scanner;
+    {
+      std::lock_guard<std::mutex> lock(render_mutex_);
+      scanner = scanner_;
+    }
+    const cellsight::Scene& s = scanner->geometry().scene();
     const auto t0 = std::chrono::steady_clock::now();
     // The controller reports `pose` (tf above); the flange really is at `actual`.
     Eigen::Isometry3d actual;
@@ -240,9 +462,9 @@ class CellSim {
       ROS_ERROR("cell_sim: %s: frame not captured", e.what());
       return;
     }
-    const cv::Mat image = scanner_->render(actual, s.noise.seed * 1000003ull + frame_count_);
+    const cv::Mat image = scanner->render(actual, s.noise.seed * 1000003ull + frame_count_);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    const cellsight::Plane plane = scanner_->planeInCamera(actual);
+    const cellsight::Plane plane = scanner->planeInCamera(actual);
     auto img = boost::make_shared<sensor_msgs::Image>(
         cellsight_ros::toImageMsg(image, s.scanner_camera.frame_id, stamp));
     auto info = boost::make_shared<sensor_msgs::CameraInfo>(
@@ -261,9 +483,14 @@ class CellSim {
 
   void onFixtureFrame(const ros::TimerEvent&) {
     if (fixture_pub_.getNumSubscribers() == 0) return;
-    const cellsight::Scene& s = geometry_->scene();
+    std::shared_ptr<const cellsight::FixtureRenderer> fixture;
+    {
+      std::lock_guard<std::mutex> lock(render_mutex_);
+      fixture = fixture_;
+    }
+    const cellsight::Scene& s = fixture->geometry().scene();
     const ros::Time stamp = ros::Time::now();
-    const cv::Mat image = fixture_->render(s.noise.seed * 7919ull + fixture_count_++);
+    const cv::Mat image = fixture->render(s.noise.seed * 7919ull + fixture_count_++);
     auto img = boost::make_shared<sensor_msgs::Image>(
         cellsight_ros::toImageMsg(image, s.fixture_camera.frame_id, stamp));
     auto info = boost::make_shared<sensor_msgs::CameraInfo>(
@@ -278,7 +505,12 @@ class CellSim {
   }
 
   void publishMarkers() {
-    const cellsight::Scene& s = geometry_->scene();
+    std::shared_ptr<const cellsight::CellGeometry> geometry;
+    {
+      std::lock_guard<std::mutex> lock(render_mutex_);
+      geometry = geometry_;
+    }
+    const cellsight::Scene& s = geometry->scene();
     visualization_msgs::MarkerArray arr;
     int id = 0;
     auto base = [&](const std::string& ns) {
@@ -356,8 +588,25 @@ class CellSim {
   cellsight_ros::NodeDiagnostics diag_;
   image_transport::ImageTransport it_;
   std::shared_ptr<const cellsight::CellGeometry> geometry_;
-  std::unique_ptr<cellsight::ScannerRenderer> scanner_;
-  std::unique_ptr<cellsight::FixtureRenderer> fixture_;
+  std::shared_ptr<const cellsight::ScannerRenderer> scanner_;
+  std::shared_ptr<const cellsight::FixtureRenderer> fixture_;
+  std::mutex render_mutex_;  // guards the three pointers above (swapped when a part is put down)
+  std::unique_ptr<cellsight::ArmModel> arm_;
+  cellsight::JointVector q_ = cellsight::JointVector::Zero();
+  cellsight::TimedTrajectory traj_;
+  size_t grasp_index_ = 0, release_index_ = 0;
+  int next_event_ = 0;
+  double time_scale_ = 1.0;
+  ros::Time exec_start_;
+  std::string exec_object_;
+  bool executing_ = false;
+  int held_ = -1;  // scene object between the jaws
+  Eigen::Isometry3d T_tcp_held_ = Eigen::Isometry3d::Identity();
+  uint64_t moves_ = 0;
+  std::map<std::string, cellsight::TriangleMesh> meshes_;
+  std::ofstream placements_truth_;
+  ros::Publisher joints_pub_;
+  ros::ServiceServer execute_srv_;
   std::string truth_dir_;
   cellsight::RobotErrorModel robot_;
   cellsight::CameraIntrinsics scanner_info_;

@@ -1,5 +1,7 @@
 #include "cellsight_ros/conversions.hpp"
 
+#include <algorithm>
+
 #include <sensor_msgs/image_encodings.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 
@@ -293,6 +295,104 @@ int64_t toNanoseconds(const ros::Time& t) { return static_cast<int64_t>(t.toNSec
 ros::Time fromNanoseconds(int64_t ns) {
   ros::Time t;
   t.fromNSec(static_cast<uint64_t>(ns));
+  return t;
+}
+
+uint8_t toPlanStatus(cellsight::PlanStatus s) {
+  using M = cellsight::GraspPlan;
+  switch (s) {
+    case cellsight::PlanStatus::kOk: return M::OK;
+    case cellsight::PlanStatus::kUnknownModel: return M::UNKNOWN_MODEL;
+    case cellsight::PlanStatus::kNotInAssembly:
+    case cellsight::PlanStatus::kBasePart: return M::NOT_IN_ASSEMBLY;
+    case cellsight::PlanStatus::kNoBase: return M::NO_BASE_PART;
+    case cellsight::PlanStatus::kNoGrasp: return M::NO_GRASP;
+    case cellsight::PlanStatus::kUnreachable: return M::UNREACHABLE;
+    case cellsight::PlanStatus::kNoPath: return M::NO_PATH;
+    case cellsight::PlanStatus::kBadInput: return M::BAD_INPUT;
+    case cellsight::PlanStatus::kNothingLeft: return M::NOTHING_LEFT;
+  }
+  return M::BAD_INPUT;
+}
+
+cellsight::GraspPlan toGraspPlanMsg(const cellsight::PartPlan& plan, const std::array<std::string, 6>& joint_names,
+                                    const std::string& frame, const ros::Time& stamp) {
+  cellsight::GraspPlan m;
+  m.header.frame_id = frame;
+  m.header.stamp = stamp;
+  m.object = plan.part.name;
+  m.model = plan.part.model;
+  m.status = toPlanStatus(plan.status);
+  m.reason = plan.reason;
+  for (const auto& p : plan.poses) {
+    m.pose_names.push_back(p.name);
+    m.poses.push_back(toPoseMsg(p.T_base_tcp));
+  }
+  m.target = toPoseMsg(plan.T_base_target);
+  m.grip_width = plan.grip_opening;
+  m.jaw_opening = plan.segments.empty() ? 0.0 : plan.segments.front().opening;
+  m.grasp_source = plan.grasp.source;
+  m.candidates = plan.candidates;
+  m.candidates_tried = plan.candidates_tried;
+  m.plan_seconds = plan.seconds;
+  m.sampled = plan.sampled;
+  m.passed_over = plan.passed_over;
+  if (plan.status == cellsight::PlanStatus::kOk) {
+    m.trajectory.header.frame_id = frame;
+    m.trajectory.header.stamp = stamp;
+    m.trajectory.joint_names.assign(joint_names.begin(), joint_names.end());
+    for (size_t i = 0; i < plan.trajectory.positions.size(); ++i) {
+      trajectory_msgs::JointTrajectoryPoint pt;
+      for (int j = 0; j < 6; ++j) {
+        pt.positions.push_back(plan.trajectory.positions[i][j]);
+        pt.velocities.push_back(plan.trajectory.velocities[i][j]);
+      }
+      pt.time_from_start = ros::Duration(plan.trajectory.times[i]);
+      m.trajectory.points.push_back(pt);
+    }
+    m.grasp_index = static_cast<uint32_t>(plan.grasp_index);
+    m.release_index = static_cast<uint32_t>(plan.release_index);
+  }
+  return m;
+}
+
+cellsight::TimedTrajectory fromTrajectoryMsg(const trajectory_msgs::JointTrajectory& msg,
+                                             const std::array<std::string, 6>& joint_names) {
+  if (msg.points.empty()) throw std::invalid_argument("the trajectory has no points");
+  if (msg.joint_names.size() != 6) {
+    throw std::invalid_argument("the trajectory names " + std::to_string(msg.joint_names.size()) + " joints, the arm has 6");
+  }
+  std::array<int, 6> column{};
+  for (int j = 0; j < 6; ++j) {
+    const auto it = std::find(msg.joint_names.begin(), msg.joint_names.end(), joint_names[static_cast<size_t>(j)]);
+    if (it == msg.joint_names.end()) {
+      throw std::invalid_argument("the trajectory has no joint '" + joint_names[static_cast<size_t>(j)] + "'");
+    }
+    column[static_cast<size_t>(j)] = static_cast<int>(it - msg.joint_names.begin());
+  }
+  cellsight::TimedTrajectory t;
+  double last = -1;
+  for (size_t i = 0; i < msg.points.size(); ++i) {
+    const auto& p = msg.points[i];
+    if (p.positions.size() != 6) {
+      throw std::invalid_argument("trajectory point " + std::to_string(i) + " has " + std::to_string(p.positions.size()) +
+                                  " positions, 6 expected");
+    }
+    cellsight::JointVector q, v = cellsight::JointVector::Zero();
+    for (int j = 0; j < 6; ++j) {
+      q[j] = p.positions[static_cast<size_t>(column[static_cast<size_t>(j)])];
+      if (p.velocities.size() == 6) v[j] = p.velocities[static_cast<size_t>(column[static_cast<size_t>(j)])];
+    }
+    const double time = p.time_from_start.toSec();
+    if (!q.allFinite() || !v.allFinite() || !std::isfinite(time)) {
+      throw std::invalid_argument("trajectory point " + std::to_string(i) + " is not finite");
+    }
+    if (time <= last) throw std::invalid_argument("trajectory times must increase (point " + std::to_string(i) + ")");
+    last = time;
+    t.positions.push_back(q);
+    t.velocities.push_back(v);
+    t.times.push_back(time);
+  }
   return t;
 }
 

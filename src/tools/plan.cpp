@@ -3,6 +3,7 @@
 //   cycles   full cell cycles in-process (scan, locate, plan, execute with the robot as built):
 //            placement error against the simulator's truth, planning times; exit 3 when a limit fails
 //   reach    reachability of the table area for the gripper pointing down (and tilted)
+//   demo     the demo's assembly (assembly_client's steps, cell_sim's truth) against the targets
 // Failures print "error: ..." and exit 1; bad options are reported by CLI11.
 #include <algorithm>
 #include <cmath>
@@ -11,6 +12,8 @@
 #include <numeric>
 
 #include "cellsight/common/file_io.hpp"
+#include "cellsight/localization/model_matching.hpp"
+#include <fstream>
 #include "cellsight/eval/planning_eval.hpp"
 #include "cellsight/sim/scene.hpp"
 #include "cli_args.hpp"
@@ -210,6 +213,102 @@ int runReach(const ReachOptions& o) {
   return 0;
 }
 
+struct DemoOptions {
+  std::string root = ".", scene = "config/scenes/demo.yaml", assembly, truth, json_path;
+};
+
+Eigen::Isometry3d poseOf(const json& j) {
+  const auto& t = j.at("xyz");
+  const auto& q = j.at("quat");
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(t.at(0), t.at(1), t.at(2));
+  T.linear() = Eigen::Quaterniond(q.at(3).get<double>(), q.at(0).get<double>(), q.at(1).get<double>(), q.at(2).get<double>())
+                   .normalized()
+                   .toRotationMatrix();
+  return T;
+}
+
+/// The demo's assembly against the simulator's truth: every step of assembly_client, the part
+/// cell_sim put down for it, and the error against the target (true base part · T_0i). Exit 3
+/// when a planned part was not executed or has no truth.
+int runDemo(const DemoOptions& o) {
+  const Scene scene = loadScene(o.scene[0] == '/' ? o.scene : o.root + "/" + o.scene);
+  const AssemblyConfig as = loadAssemblyConfig(o.root + "/config/assembly.yaml");
+  std::ifstream in(o.assembly);
+  if (!in) throw std::runtime_error(o.assembly + ": cannot read the assembly steps");
+  const json steps = json::parse(in).at("steps");
+  std::map<std::string, json> truth;  // by plan object
+  std::ifstream tl(o.truth);
+  if (!tl) throw std::runtime_error(o.truth + ": cannot read the placements' truth");
+  for (std::string line; std::getline(tl, line);) {
+    if (line.empty()) continue;
+    const json j = json::parse(line);
+    truth[j.at("plan_object").get<std::string>()] = j;
+  }
+  const SceneObject* base = nullptr;
+  for (const auto& ob : scene.objects) {
+    if (ob.model == as.base_model) base = &ob;
+  }
+  if (!base) throw std::runtime_error(o.scene + ": no '" + as.base_model + "' (the base part) in the scene");
+  json placements = json::array();
+  bool ok = true;
+  std::vector<double> plan_ms;
+  for (const auto& s : steps) {
+    json p = {{"object", s.at("object")}, {"model", s.at("model")}, {"status", s.at("status")}, {"reason", s.at("reason")},
+              {"plan_seconds", s.at("plan_seconds")}, {"executed", s.value("executed", false)}};
+    // status: GraspPlan's code (0 = OK), or the planner's name of a refusal for parts passed over
+    const bool is_ok = s.at("status").is_number() && s.at("status").get<int>() == 0;
+    if (is_ok) plan_ms.push_back(s.at("plan_seconds").get<double>() * 1e3);
+    p["status"] = is_ok ? json("ok") : s.at("status").is_string() ? s.at("status") : json("refused");
+    if (s.value("executed", false)) {
+      const auto it = truth.find(s.at("object").get<std::string>());
+      if (it == truth.end()) {
+        p["place_t_err_mm"] = nullptr;
+        p["place_r_err_deg"] = nullptr;
+        p["note"] = "no part was put down for it (the jaws closed on nothing)";
+        ok = false;
+      } else {
+        const std::string model = it->second.at("model");
+        const SceneObject* obj = nullptr;
+        for (const auto& ob : scene.objects) {
+          if (ob.name == it->second.at("object").get<std::string>()) obj = &ob;
+        }
+        if (!obj) throw std::runtime_error("the truth names object '" + it->second.at("object").get<std::string>() + "', not in the scene");
+        const TriangleMesh mesh = loadMesh(obj->info.mesh_file);
+        const Eigen::Isometry3d placed = poseOf(it->second.at("pose"));
+        const Eigen::Isometry3d target = base->T_base_object * obj->info.T_0i;
+        const PoseError e = poseError(obj->info, mesh.surfaceCentroid(), placed, target);
+        Eigen::Vector3d off, rot;
+        placementDeviation(obj->info, mesh.surfaceCentroid(), placed, target, &off, &rot);
+        p["truth"] = obj->name;
+        p["place_t_err_mm"] = e.translation * 1e3;
+        p["place_r_err_deg"] = e.rotation * 180 / M_PI;
+        p["offset_mm"] = {off.x() * 1e3, off.y() * 1e3, off.z() * 1e3};
+        p["motion_seconds"] = s.value("motion_seconds", 0.0);
+        if (obj->model != s.at("model").get<std::string>()) {
+          p["note"] = "the part picked is a " + obj->model + ", not the planned " + s.at("model").get<std::string>();
+          ok = false;
+        }
+      }
+    } else if (is_ok) {
+      ok = false;  // planned but not executed
+    }
+    placements.push_back(p);
+  }
+  json out = {{"placements", placements}, {"median_plan_ms", median(plan_ms)}, {"ok", ok}};
+  writeJson(o.json_path, out);
+  for (const auto& p : placements) {
+    if (p.value("executed", false) && !p["place_t_err_mm"].is_null()) {
+      std::printf("placed %s: %.3f mm, %.3f deg from its target (plan %.0f ms)\n", p["object"].get<std::string>().c_str(),
+                  p["place_t_err_mm"].get<double>(), p["place_r_err_deg"].get<double>(), p["plan_seconds"].get<double>() * 1e3);
+    } else {
+      std::printf("%s %s: %s\n", p["status"].get<std::string>().c_str(), p["object"].get<std::string>().c_str(),
+                  p["reason"].get<std::string>().c_str());
+    }
+  }
+  return ok ? 0 : 3;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -245,9 +344,17 @@ int main(int argc, char** argv) {
   reach->add_option("--scene", ro.scene, "scene file (its table)")->capture_default_str();
   reach->add_option("--step", ro.step, "grid step (m)")->check(cellsight_tools::positive())->capture_default_str();
   reach->add_option("--json", ro.json_path, "write the table here");
+  DemoOptions dopt;
+  auto* demo = app.add_subcommand("demo", "the demo's assembly (assembly_client steps + cell_sim truth) against the targets");
+  demo->add_option("--root", dopt.root, "the package folder")->capture_default_str();
+  demo->add_option("--scene", dopt.scene, "scene file")->capture_default_str();
+  demo->add_option("--assembly", dopt.assembly, "assembly_client's result file (assembly.json)")->required();
+  demo->add_option("--truth", dopt.truth, "cell_sim's truth/placements.jsonl")->required();
+  demo->add_option("--json", dopt.json_path, "write the placements here");
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
   return cellsight_tools::runTool([&] {
     if (cycles->parsed()) return runCycles(co);
+    if (demo->parsed()) return runDemo(dopt);
     return runReach(ro);
   });
 }

@@ -42,7 +42,10 @@ struct LocatedPart {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< model frame in base_link
 };
 
-enum class PlanStatus { kOk, kUnknownModel, kNotInAssembly, kBasePart, kNoBase, kNoGrasp, kUnreachable, kNoPath, kBadInput };
+enum class PlanStatus {
+  kOk, kUnknownModel, kNotInAssembly, kBasePart, kNoBase, kNoGrasp, kUnreachable, kNoPath, kBadInput,
+  kNothingLeft  ///< planNext(): every located part of the assembly is placed or was refused
+};
 const char* planStatusName(PlanStatus s);
 
 struct NamedPose {
@@ -75,6 +78,8 @@ struct PartPlan {
   int candidates = 0, candidates_tried = 0;
   double seconds = 0;
   bool sampled = false;  ///< a joint segment needed OMPL
+  /// planNext(): parts of the assembly refused before this one, "<name>: <status>: <reason>"
+  std::vector<std::string> passed_over;
 };
 
 class GraspPlanner {

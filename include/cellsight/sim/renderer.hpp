@@ -104,6 +104,7 @@ class FixtureRenderer {
   const cv::Mat& clean() const { return clean_; }
   /// The clean image plus sensor noise; CV_8UC1 or CV_8UC3 per the camera's encoding.
   cv::Mat render(uint64_t frame_seed) const;
+  const CellGeometry& geometry() const { return *geometry_; }
 
  private:
   std::shared_ptr<const CellGeometry> geometry_;
