@@ -22,3 +22,5 @@ taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_fixtures" --benchmark_r
   --benchmark_out="$CELLSIGHT_BUILD/bench/fixtures.json" --benchmark_out_format=json
 echo "== bench_localization: ours vs PCL, Open3D, OpenCV on the same single-view clouds (one thread each)"
 taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_localization" "$CELLSIGHT_BUILD/bench/localization.json" 8
+echo "== bench_planning: the demo assembly in 20 scenarios, ours vs OMPL RRTConnect / RRT unsimplified and straight joint moves (one core)"
+taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_planning" "$CELLSIGHT_BUILD/bench/planning.json" 20

@@ -50,10 +50,10 @@ void placementDeviation(const ModelInfo& info, const Eigen::Vector3d& centroid, 
 
 Eigen::Isometry3d simulatePlacement(const ArmModel& arm, const RobotErrorModel& robot, const PartPlan& plan,
                                     const Eigen::Isometry3d& T_base_part_true, uint64_t move) {
-  const Eigen::Isometry3d cmd_grasp = arm.fk(plan.trajectory.positions.at(plan.grasp_index));
-  const Eigen::Isometry3d cmd_release = arm.fk(plan.trajectory.positions.at(plan.release_index));
-  const Eigen::Isometry3d tcp_grasp = robot.actual(cmd_grasp, move) * arm.toolTcp();
-  const Eigen::Isometry3d tcp_release = robot.actual(cmd_release, move + 1) * arm.toolTcp();
+  // the controller holds the plan's joints; the arm as built puts the flange where they lead
+  const Eigen::Isometry3d tcp_grasp = robot.actualAtJoints(plan.trajectory.positions.at(plan.grasp_index), move) * arm.toolTcp();
+  const Eigen::Isometry3d tcp_release =
+      robot.actualAtJoints(plan.trajectory.positions.at(plan.release_index), move + 1) * arm.toolTcp();
   return tcp_release * (tcp_grasp.inverse() * T_base_part_true);
 }
 

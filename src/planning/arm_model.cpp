@@ -166,7 +166,7 @@ ArmModel ArmModel::fromUrdfString(const std::string& xml, const std::string& sou
       in_chain = o * in_chain;
       l = model->getLink(pj->parent_link_name);
     }
-    if (!l) continue;
+    if (!l || !chain_frame.count(l->name)) continue;  // e.g. a world link above base_link: not the arm's
     const int frame = chain_frame.at(l->name);
     if (link->name == "tcp") {
       if (frame != chain_frame.at("tool0")) throw ConfigError(source + ": link 'tcp' must hang from tool0");

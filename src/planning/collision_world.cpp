@@ -7,10 +7,13 @@
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/narrowphase/collision.h>
 #include <fcl/narrowphase/collision_object.h>
+#include <fcl/narrowphase/distance.h>
 #include <octomap/OcTree.h>
 
 #include <cmath>
+#include <limits>
 #include <map>
+#include <mutex>
 #include <stdexcept>
 #include <unordered_map>
 
@@ -41,7 +44,20 @@ bool overlap(const fcl::AABBd& a, const fcl::AABBd& b) { return a.overlap(b); }
 
 }  // namespace
 
+/// BVHs per mesh, shared by a world and its copies (built once per part model).
+struct BvhCache {
+  std::mutex mutex;
+  std::map<const TriangleMesh*, std::pair<std::shared_ptr<const TriangleMesh>, std::shared_ptr<Bvh>>> bvh;
+  std::shared_ptr<Bvh> get(const std::shared_ptr<const TriangleMesh>& mesh) {
+    std::lock_guard<std::mutex> lock(mutex);
+    auto& e = bvh[mesh.get()];
+    if (!e.second) e = {mesh, bvhOf(*mesh)};
+    return e.second;
+  }
+};
+
 struct CollisionWorld::Impl {
+  std::shared_ptr<BvhCache> cache = std::make_shared<BvhCache>();
   struct Object {
     std::string name;
     std::shared_ptr<const TriangleMesh> mesh;
@@ -59,8 +75,8 @@ struct CollisionWorld::Impl {
   // per-arm-shape geometry, built lazily for the arm it is first used with
   mutable std::vector<std::shared_ptr<fcl::CollisionObjectd>> shape_objs;
   mutable const ArmModel* shapes_of = nullptr;
-  // the carried part's BVH, per mesh (the mesh is kept alive with it)
-  mutable std::map<const TriangleMesh*, std::pair<std::shared_ptr<const TriangleMesh>, std::shared_ptr<Bvh>>> carried_bvh;
+  // the carried part's padded box, per mesh (the mesh is kept alive with it)
+  mutable std::map<const TriangleMesh*, std::pair<std::shared_ptr<const TriangleMesh>, std::shared_ptr<fcl::Boxd>>> carried_box;
 };
 
 CollisionWorld::CollisionWorld(const CollisionWorldConfig& config, double table_z, const Eigen::Vector2d& table_center,
@@ -86,18 +102,15 @@ CollisionWorld::~CollisionWorld() = default;
 
 CollisionWorld::CollisionWorld(const CollisionWorld& o) : config_(o.config_), impl_(std::make_unique<Impl>()) {
   impl_->next_id = o.impl_->next_id;
+  impl_->cache = o.impl_->cache;
   for (const auto& [id, ob] : o.impl_->objects) {
     Impl::Object c = ob;
-    c.obj = std::make_shared<fcl::CollisionObjectd>(ob.bvh, ob.pose);
-    c.obj->computeAABB();
+    c.obj = std::make_shared<fcl::CollisionObjectd>(*ob.obj);  // a copy: the shared BVH is not recomputed
     impl_->objects[id] = c;
   }
   impl_->octree = o.impl_->octree;
   impl_->octree_geom = o.impl_->octree_geom;
-  if (impl_->octree_geom) {
-    impl_->octree_obj = std::make_shared<fcl::CollisionObjectd>(impl_->octree_geom, fcl::Transform3d::Identity());
-    impl_->octree_obj->computeAABB();
-  }
+  if (o.impl_->octree_obj) impl_->octree_obj = std::make_shared<fcl::CollisionObjectd>(*o.impl_->octree_obj);
   impl_->voxels = o.impl_->voxels;
   impl_->table = o.impl_->table;
   impl_->table_low = o.impl_->table_low;
@@ -110,14 +123,24 @@ int CollisionWorld::addObject(const std::string& name, std::shared_ptr<const Tri
   Impl::Object o;
   o.name = name;
   o.mesh = mesh;
-  // one BVH per mesh, shared between instances
-  for (const auto& [id, other] : impl_->objects) {
-    if (other.mesh == mesh) o.bvh = other.bvh;
-  }
-  if (!o.bvh) o.bvh = bvhOf(*mesh);
+  // one BVH per mesh, shared between instances (and copies of the world): FCL computes a
+  // geometry's local box when an object is made of it, so a shared BVH gets its objects by copy
   o.pose = pose;
-  o.obj = std::make_shared<fcl::CollisionObjectd>(o.bvh, pose);
-  o.obj->computeAABB();
+  for (const auto& [id, other] : impl_->objects) {
+    if (other.mesh != mesh) continue;
+    o.bvh = other.bvh;
+    o.obj = std::make_shared<fcl::CollisionObjectd>(*other.obj);
+    o.obj->setTransform(pose);
+    o.obj->computeAABB();
+    break;
+  }
+  if (!o.bvh) {
+    // a BVH already built for this mesh (by this world or the one it was copied from) is shared;
+    // FCL's object constructor recomputes its local box, which holds the same values
+    o.bvh = impl_->cache->get(mesh);
+    o.obj = std::make_shared<fcl::CollisionObjectd>(o.bvh, pose);
+    o.obj->computeAABB();
+  }
   const int id = impl_->next_id++;
   impl_->objects[id] = o;
   return id;
@@ -173,6 +196,14 @@ size_t CollisionWorld::setScan(const std::vector<Eigen::Vector3f>& points) {
   return n;
 }
 
+void CollisionWorld::setPadding(double padding) {
+  if (!(padding >= 0)) throw std::invalid_argument("collision world: padding must be >= 0");
+  config_.padding = padding;
+  impl_->shape_objs.clear();
+  impl_->shapes_of = nullptr;
+  impl_->carried_box.clear();
+}
+
 size_t CollisionWorld::occupiedVoxels() const { return impl_->voxels; }
 
 std::vector<Eigen::Vector3d> CollisionWorld::voxelCentres() const {
@@ -213,14 +244,37 @@ CollisionReport CollisionWorld::check(const ArmModel& arm, const JointVector& q,
     impl_->shape_objs[i]->computeAABB();
   }
   fcl::CollisionRequestd req;
-  auto collide = [&](const fcl::CollisionObjectd& a, const fcl::CollisionObjectd& b) {
-    if (!overlap(a.getAABB(), b.getAABB())) return false;
+  CollisionReport r;
+  double gap = std::numeric_limits<double>::infinity();
+  // `weight` 0.5 for two moving shapes (their relative travel is at most twice one's bound);
+  // `primitive`: both are boxes or cylinders, whose exact distance (GJK) is cheap
+  fcl::DistanceRequestd dreq;
+  auto collide = [&](const fcl::CollisionObjectd& a, const fcl::CollisionObjectd& b, double weight = 1.0,
+                     bool primitive = false) {
+    if (!overlap(a.getAABB(), b.getAABB())) {
+      double d = a.getAABB().distance(b.getAABB());
+      if (primitive && weight * d < 0.05 && weight * d < gap) {
+        // a loose box of a turned link: the exact distance, when it could set the step
+        fcl::DistanceResultd dres;
+        fcl::distance(&a, &b, dreq, dres);
+        d = std::max(d, dres.min_distance);
+      }
+      gap = std::min(gap, weight * d);
+      return false;
+    }
     ++checks_;
     fcl::CollisionResultd res;
     fcl::collide(&a, &b, req, res);
-    return res.isCollision();
+    if (res.isCollision()) return true;
+    if (primitive) {
+      fcl::DistanceResultd dres;
+      fcl::distance(&a, &b, dreq, dres);
+      gap = std::min(gap, weight * std::max(0.0, dres.min_distance));
+    } else {
+      gap = 0;
+    }
+    return false;
   };
-  CollisionReport r;
   auto hit = [&](const std::string& a, const std::string& b) {
     r.collides = true;
     r.first = a;
@@ -229,7 +283,7 @@ CollisionReport CollisionWorld::check(const ArmModel& arm, const JointVector& q,
   };
   auto against_world = [&](const fcl::CollisionObjectd& o, const std::string& name, bool table, bool low_table,
                             int ignore) -> bool {
-    if (table && collide(o, low_table ? *impl_->table_low : *impl_->table)) return hit(name, "table"), true;
+    if (table && collide(o, low_table ? *impl_->table_low : *impl_->table, 1.0, true)) return hit(name, "table"), true;
     if (impl_->octree_obj && collide(o, *impl_->octree_obj)) return hit(name, "scan voxels"), true;
     for (const auto& [id, ob] : impl_->objects) {
       if (id == ignore) continue;
@@ -246,23 +300,30 @@ CollisionReport CollisionWorld::check(const ArmModel& arm, const JointVector& q,
     if (shapes[i].chain_index < 6) continue;
     for (size_t k = 0; k < shapes.size(); ++k) {
       if (shapes[k].chain_index > 2) continue;
-      if (collide(*impl_->shape_objs[i], *impl_->shape_objs[k])) return hit(shapes[i].link, shapes[k].link);
+      if (collide(*impl_->shape_objs[i], *impl_->shape_objs[k], 0.5, true)) return hit(shapes[i].link, shapes[k].link);
     }
   }
   if (carried && carried->mesh) {
-    auto& entry = impl_->carried_bvh[carried->mesh.get()];
-    if (!entry.second) entry = {carried->mesh, bvhOf(*carried->mesh)};
-    const auto& bvh = entry.second;
-    const Eigen::Isometry3d T = arm.fk(q) * arm.toolTcp() * carried->T_tcp_part;
-    fcl::CollisionObjectd part(bvh, T);
+    // the carried part as its padded bounding box in its own frame: every checked shape is
+    // padded, so the certified stepping covers the bare geometry between the steps
+    auto& entry = impl_->carried_box[carried->mesh.get()];
+    if (!entry.second) {
+      const Eigen::AlignedBox3f b = carried->mesh->bounds();
+      const Eigen::Vector3d size = (b.max() - b.min()).cast<double>() + Eigen::Vector3d::Constant(2 * config_.padding);
+      entry = {carried->mesh, std::make_shared<fcl::Boxd>(size.x(), size.y(), size.z())};
+    }
+    const Eigen::Vector3d centre = carried->mesh->bounds().center().cast<double>();
+    const Eigen::Isometry3d T = arm.fk(q) * arm.toolTcp() * carried->T_tcp_part * Eigen::Translation3d(centre);
+    fcl::CollisionObjectd part(entry.second, T);
     part.computeAABB();
     const std::string name = "carried " + (carried->name.empty() ? std::string("part") : carried->name);
     if (against_world(part, name, true, true, ignore_object)) return r;
     for (size_t k = 0; k < shapes.size(); ++k) {
       if (shapes[k].chain_index > 4) continue;  // the wrist and the tool hold it
-      if (collide(part, *impl_->shape_objs[k])) return hit(name, shapes[k].link);
+      if (collide(part, *impl_->shape_objs[k], 0.5, true)) return hit(name, shapes[k].link);
     }
   }
+  r.clearance = std::isfinite(gap) ? gap : 1.0;
   return r;
 }
 

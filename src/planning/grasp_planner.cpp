@@ -47,6 +47,9 @@ AssemblyConfig loadAssemblyConfig(const std::string& path) {
   c.lift_height = m.getDouble("lift_height", c.lift_height);
   c.preplace_distance = m.getDouble("preplace_distance", c.preplace_distance);
   c.retreat_distance = m.getDouble("retreat_distance", c.retreat_distance);
+  c.insert_contact_distance = m.getDouble("insert_contact_distance", c.insert_contact_distance);
+  c.placed_tolerance = m.getDouble("placed_tolerance", c.placed_tolerance);
+  c.placed_tolerance_rad = m.getDouble("placed_tolerance_rad", c.placed_tolerance_rad);
   c.min_approach_down = m.getDouble("min_approach_down", c.min_approach_down);
   c.max_candidates = m.getInt("max_candidates", c.max_candidates);
   if (m.has("home")) {
@@ -59,8 +62,12 @@ AssemblyConfig loadAssemblyConfig(const std::string& path) {
                      : key == std::string("lift_height")     ? c.lift_height
                      : key == std::string("preplace_distance") ? c.preplace_distance
                                                                : c.retreat_distance;
-    if (!(v >= 0 && v < 0.5)) m.fail(key, "must be in [0, 0.5) m");
+    if (!(v > 0 && v < 0.5)) m.fail(key, "must be in (0, 0.5) m");
   }
+  if (!(c.insert_contact_distance >= 0 && c.insert_contact_distance < c.preplace_distance)) {
+    m.fail("insert_contact_distance", "must be in [0, preplace_distance)");
+  }
+  if (!(c.placed_tolerance > 0) || !(c.placed_tolerance_rad > 0)) m.fail("placed_tolerance", "tolerances must be > 0");
   if (c.max_candidates < 1) m.fail("max_candidates", "must be >= 1");
   if (std::find(c.order.begin(), c.order.end(), c.base_model) != c.order.end()) {
     m.fail("order", "must not hold the base model '" + c.base_model + "' (it stays where it lies)");
@@ -101,6 +108,25 @@ void GraspPlanner::setScene(CollisionWorld world, const std::vector<LocatedPart>
                                                                               : world_->addObject(p.name, it->second.second, p.pose));
   }
   world_->setScan(scan);
+  // lying at its target already
+  size_t base = parts_.size();
+  for (size_t i = 0; i < parts_.size(); ++i) {
+    if (parts_[i].model == assembly_.base_model && object_ids_[i] >= 0 && base == parts_.size()) base = i;
+  }
+  for (size_t i = 0; i < parts_.size(); ++i) {
+    auto it = models_.find(parts_[i].model);
+    if (base == parts_.size() || i == base || it == models_.end()) continue;
+    const ModelInfo& info = it->second.first;
+    const Eigen::Isometry3d target = parts_[base].pose * info.T_0i;
+    const Eigen::Vector3d c = it->second.second->surfaceCentroid();
+    if ((parts_[i].pose * c - target * c).norm() > assembly_.placed_tolerance) continue;
+    for (const auto& S : symmetryRotations(info, 72, c)) {
+      if (Eigen::AngleAxisd(parts_[i].pose.linear().transpose() * (target * S).linear()).angle() <= assembly_.placed_tolerance_rad) {
+        placed_[i] = 1;
+        break;
+      }
+    }
+  }
 }
 
 PartPlan GraspPlanner::plan(size_t index, const JointVector& start) const {
@@ -140,15 +166,16 @@ PartPlan GraspPlanner::plan(size_t index, const JointVector& start) const {
   p.candidates = static_cast<int>(all.size());
   const double cone = std::atan(gripper_.friction);
   std::vector<std::pair<double, const GraspCandidate*>> ranked;
+  std::map<std::string, int> measured;  // refused before planning: the jaws, the friction cone, the approach
   for (const GraspCandidate& c : all) {
     if (!c.valid) {
-      ++p.pruned[c.reason.substr(0, c.reason.find(" ("))];
+      ++measured[c.reason.substr(0, c.reason.find(" ("))];
       continue;
     }
     const Eigen::Isometry3d T = p.part.pose * c.T_model_tcp;
     const double down = -T.linear().col(2).z();
     if (down < assembly_.min_approach_down) {
-      ++p.pruned["approach from below the table"];
+      ++measured["approach from below the table"];
       continue;
     }
     const double score = down + 0.5 * (1 - std::min(1.0, c.centroid_distance / 0.05)) +
@@ -157,9 +184,10 @@ PartPlan GraspPlanner::plan(size_t index, const JointVector& start) const {
                          (c.source.rfind("model", 0) == 0 ? 0.5 : 0.0);  // the part author's grasp first
     ranked.emplace_back(score, &c);
   }
+  for (const auto& [r, n] : measured) p.pruned[r] += n;
   if (ranked.empty()) {
     std::string why;
-    for (const auto& [r, n] : p.pruned) why += (why.empty() ? "" : "; ") + r + " x" + std::to_string(n);
+    for (const auto& [r, n] : measured) why += (why.empty() ? "" : "; ") + r + " x" + std::to_string(n);
     return finish(PlanStatus::kNoGrasp, "no grasp candidate fits: " + (why.empty() ? std::string("none generated") : why));
   }
   std::stable_sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
@@ -167,7 +195,7 @@ PartPlan GraspPlanner::plan(size_t index, const JointVector& start) const {
   const Eigen::Isometry3d T_base_part = parts_[base].pose;
   const Eigen::Isometry3d T_target = T_base_part * info.T_0i;
   const Eigen::Vector3d v = (T_base_part.linear() * info.assembly_direction).normalized();
-  const auto sym = symmetryRotations(info, gripper_.axial_steps);
+  const auto sym = symmetryRotations(info, gripper_.axial_steps, mesh->surfaceCentroid());
   const int obj = object_ids_[index];
   const int base_obj = object_ids_[base];
   CollisionWorld w_carry(*world_);
@@ -189,12 +217,19 @@ PartPlan GraspPlanner::plan(size_t index, const JointVector& start) const {
       ++p.pruned["pre-grasp unreachable"];
       continue;
     }
-    if (!arm_.ik(tool0(T_grasp), *q_pre)) {
+    const auto q_at_grasp = arm_.ik(tool0(T_grasp), *q_pre);
+    if (!q_at_grasp) {
       ++p.pruned["grasp unreachable"];
       continue;
     }
     any_reachable = true;
-    CollisionReport r = motion_.checkState(*q_pre, c_open);
+    // the two ends first: cheaper than the straight line between them
+    CollisionReport r = motion_.checkState(*q_at_grasp, c_open);
+    if (r.collides) {
+      ++p.pruned["grasp collides: " + r.text()];
+      continue;
+    }
+    r = motion_.checkState(*q_pre, c_open);
     if (r.collides) {
       ++p.pruned["pre-grasp collides: " + r.text()];
       continue;
@@ -237,8 +272,17 @@ PartPlan GraspPlanner::plan(size_t index, const JointVector& start) const {
       ++p.pruned[pp_reason];
       continue;
     }
-    CollisionContext c_insert{&w_carry, g.width, &carried, base_obj};
-    const PathResult insert = motion_.planCartesian(*q_pp, tool0(T_place), c_insert);
+    // the insertion: checked against everything down to its last stretch, where the part may
+    // touch the one it goes into
+    const Eigen::Isometry3d T_contact = Eigen::Translation3d(-v * assembly_.insert_contact_distance) * T_place;
+    PathResult insert = motion_.planCartesian(*q_pp, tool0(T_contact), c_carry);
+    if (insert.ok) {
+      CollisionContext c_insert{&w_carry, g.width, &carried, base_obj};
+      const PathResult last = motion_.planCartesian(insert.waypoints.back(), tool0(T_place), c_insert);
+      insert.ok = last.ok;
+      insert.reason = last.reason;
+      insert.waypoints.insert(insert.waypoints.end(), last.waypoints.begin() + 1, last.waypoints.end());
+    }
     if (!insert.ok) {
       ++p.pruned["insert: " + insert.reason.substr(0, insert.reason.find(" at "))];
       continue;
@@ -284,8 +328,10 @@ PartPlan GraspPlanner::plan(size_t index, const JointVector& start) const {
     return finish(PlanStatus::kOk, "");
   }
   std::string why;
-  std::vector<std::pair<int, std::string>> counts;
-  for (const auto& [r, n] : p.pruned) counts.emplace_back(n, r);
+  std::vector<std::pair<int, std::string>> counts;  // what the candidates that were planned ran into
+  for (const auto& [r, n] : p.pruned) {
+    if (!measured.count(r)) counts.emplace_back(n, r);
+  }
   std::sort(counts.rbegin(), counts.rend());
   for (size_t i = 0; i < counts.size() && i < 4; ++i) why += (i ? "; " : "") + counts[i].second + " x" + std::to_string(counts[i].first);
   return finish(any_reachable ? PlanStatus::kNoPath : PlanStatus::kUnreachable,

@@ -86,8 +86,8 @@ Eigen::Isometry3d frameFrom(const Eigen::Vector3d& origin, const Eigen::Vector3d
 
 }  // namespace
 
-std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> symmetryRotations(const ModelInfo& info,
-                                                                                                int axial_steps) {
+std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> symmetryRotations(
+    const ModelInfo& info, int axial_steps, const Eigen::Vector3d& centroid) {
   std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> out;
   int n = 1;
   Eigen::Vector3d axis = info.symmetry.axis.normalized();
@@ -97,7 +97,10 @@ std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> symm
     case Symmetry::Type::kAxial: n = std::max(1, axial_steps); break;
     case Symmetry::Type::kSpherical: n = std::max(1, axial_steps); axis = Eigen::Vector3d::UnitZ(); break;
   }
-  for (int k = 0; k < n; ++k) out.emplace_back(Eigen::AngleAxisd(2 * M_PI * k / n, axis));
+  const Eigen::Vector3d pivot = info.symmetry.type == Symmetry::Type::kSpherical ? centroid : Eigen::Vector3d::Zero();
+  for (int k = 0; k < n; ++k) {
+    out.push_back(Eigen::Translation3d(pivot) * Eigen::AngleAxisd(2 * M_PI * k / n, axis) * Eigen::Translation3d(-pivot));
+  }
   return out;
 }
 
@@ -118,7 +121,7 @@ std::vector<GraspCandidate> graspCandidates(const ModelInfo& info, const Triangl
   caster.addMesh(mesh, Eigen::Isometry3d::Identity());
   caster.commit();
   const Eigen::Vector3d centroid = mesh.surfaceCentroid();
-  const auto sym = symmetryRotations(info, c.axial_steps);
+  const auto sym = symmetryRotations(info, c.axial_steps, centroid);
   std::vector<GraspCandidate> out;
   // 1. the author's grasp frame, the jaws turned about its normal
   for (int k = 0; k < c.yaw_steps; ++k) {

@@ -1,6 +1,8 @@
 #include "cellsight/planning/motion_planner.hpp"
 
+#include <ompl/base/MotionValidator.h>
 #include <ompl/base/spaces/RealVectorStateSpace.h>
+#include <ompl/geometric/PathSimplifier.h>
 #include <ompl/geometric/SimpleSetup.h>
 #include <ompl/geometric/planners/prm/PRM.h>
 #include <ompl/geometric/planners/rrt/RRT.h>
@@ -32,6 +34,48 @@ void quietOmpl() {
   });
 }
 
+/// OMPL's edges checked by MotionPlanner::edgeValid (the certified stepping), not OMPL's
+/// fixed-resolution discrete validator.
+class CertifiedMotionValidator : public ob::MotionValidator {
+ public:
+  CertifiedMotionValidator(const ob::SpaceInformationPtr& si, const MotionPlanner& mp, const CollisionContext& ctx)
+      : ob::MotionValidator(si), mp_(mp), ctx_(ctx) {}
+  bool checkMotion(const ob::State* s1, const ob::State* s2) const override {
+    if (!si_->isValid(s2)) {
+      ++invalid_;
+      return false;
+    }
+    const bool ok = mp_.edgeValid(joints(s1), joints(s2), ctx_);
+    ok ? ++valid_ : ++invalid_;
+    return ok;
+  }
+  bool checkMotion(const ob::State* s1, const ob::State* s2, std::pair<ob::State*, double>& last_valid) const override {
+    const JointVector a = joints(s1), b = joints(s2);
+    const int n = mp_.certifiedSteps(a, b, ctx_);
+    for (int i = 1; i <= n; ++i) {
+      if (mp_.checkState(a + (b - a) * (static_cast<double>(i) / n), ctx_).collides) {
+        const double t = static_cast<double>(i - 1) / n;
+        if (last_valid.first) si_->getStateSpace()->interpolate(s1, s2, t, last_valid.first);
+        last_valid.second = t;
+        ++invalid_;
+        return false;
+      }
+    }
+    ++valid_;
+    return true;
+  }
+
+ private:
+  static JointVector joints(const ob::State* s) {
+    const auto* v = s->as<ob::RealVectorStateSpace::StateType>();
+    JointVector q;
+    for (int i = 0; i < 6; ++i) q[i] = v->values[i];
+    return q;
+  }
+  const MotionPlanner& mp_;
+  CollisionContext ctx_;
+};
+
 }  // namespace
 
 MotionPlanner::MotionPlanner(const ArmModel& arm, const MotionPlannerConfig& config) : arm_(arm), config_(config) {
@@ -42,8 +86,8 @@ MotionPlanner::MotionPlanner(const ArmModel& arm, const MotionPlannerConfig& con
         "motion planner: edge_resolution, cartesian_step, planning_time, acceleration, max_joint_jump > 0 and "
         "velocity_scale in (0, 1] required");
   }
-  if (config_.planner != "rrtconnect" && config_.planner != "rrt" && config_.planner != "prm") {
-    throw std::invalid_argument("motion planner: planner '" + config_.planner + "' unknown (rrtconnect, rrt, prm)");
+  if (config_.planner != "rrtconnect" && config_.planner != "rrt" && config_.planner != "prm" && config_.planner != "straight") {
+    throw std::invalid_argument("motion planner: planner '" + config_.planner + "' unknown (rrtconnect, rrt, prm, straight)");
   }
   quietOmpl();
 }
@@ -60,10 +104,37 @@ CollisionReport MotionPlanner::checkState(const JointVector& q, const CollisionC
   return ctx.world->check(arm_, q, ctx.opening, ctx.carried, ctx.ignore_object);
 }
 
+int MotionPlanner::certifiedSteps(const JointVector& a, const JointVector& b, const CollisionContext& ctx) const {
+  const double padding = ctx.world ? ctx.world->config().padding : 0.0;
+  double sweep = 0;  // upper bound of any point's travel along the edge
+  for (int j = 0; j < 6; ++j) sweep += std::abs(b[j] - a[j]) * config_.reach[static_cast<size_t>(j)];
+  const int by_padding = padding > 0 ? static_cast<int>(std::ceil(sweep / padding)) : 1;
+  const int by_angle = static_cast<int>(std::ceil(jointDistance(a, b) / config_.edge_resolution));
+  return std::max({1, by_padding, by_angle});
+}
+
 bool MotionPlanner::edgeValid(const JointVector& a, const JointVector& b, const CollisionContext& ctx,
                               double resolution, CollisionReport* where) const {
-  const double res = resolution > 0 ? resolution : config_.edge_resolution;
-  const int n = std::max(1, static_cast<int>(std::ceil(jointDistance(a, b) / res)));
+  if (resolution <= 0 && ctx.world && ctx.world->config().padding > 0) {
+    // conservative advancement: from each free state, every point may travel the clearance
+    // there plus the padding before the next check (travel bound: Σ |Δq_j| · reach_j per unit s)
+    double rate = 0;
+    for (int j = 0; j < 6; ++j) rate += std::abs(b[j] - a[j]) * config_.reach[static_cast<size_t>(j)];
+    const double padding = ctx.world->config().padding;
+    const double max_ds = jointDistance(a, b) > 0 ? config_.edge_resolution / jointDistance(a, b) : 1.0;
+    double s = 0;
+    while (true) {
+      const CollisionReport r = checkState(a + (b - a) * s, ctx);
+      if (r.collides) {
+        if (where) *where = r;
+        return false;
+      }
+      if (s >= 1 || rate <= 0) return true;
+      s = std::min(1.0, s + std::min(max_ds, (r.clearance + padding) / rate));
+    }
+  }
+  const int n = resolution > 0 ? std::max(1, static_cast<int>(std::ceil(jointDistance(a, b) / resolution)))
+                               : certifiedSteps(a, b, ctx);
   for (int i = 0; i <= n; ++i) {
     const JointVector q = a + (b - a) * (static_cast<double>(i) / n);
     const CollisionReport r = checkState(q, ctx);
@@ -102,10 +173,11 @@ PathResult MotionPlanner::planJoint(const JointVector& from, const JointVector& 
   if (r.collides) return done(false, "the start collides: " + r.text());
   r = checkState(to, ctx);
   if (r.collides) return done(false, "the goal collides: " + r.text());
-  if (config_.direct_first && edgeValid(from, to, ctx)) {
+  if ((config_.direct_first || config_.planner == "straight") && edgeValid(from, to, ctx, 0, &r)) {
     out.waypoints = {from, to};
     return done(true, "");
   }
+  if (config_.planner == "straight") return done(false, "the straight joint edge collides: " + r.text());
   out.sampled = true;
   auto space = std::make_shared<ob::RealVectorStateSpace>(6);
   ob::RealVectorBounds bounds(6);
@@ -121,9 +193,8 @@ PathResult MotionPlanner::planJoint(const JointVector& from, const JointVector& 
     for (int i = 0; i < 6; ++i) q[i] = v->values[i];
     return !checkState(q, ctx).collides;
   });
-  // OMPL's resolution is a share of the space's extent (Euclidean): at most edge_resolution per joint
-  ss.getSpaceInformation()->setStateValidityCheckingResolution(config_.edge_resolution / space->getMaximumExtent());
   const auto si = ss.getSpaceInformation();
+  si->setMotionValidator(std::make_shared<CertifiedMotionValidator>(si, *this, ctx));
   if (config_.planner == "rrt") {
     ss.setPlanner(std::make_shared<og::RRT>(si));
   } else if (config_.planner == "prm") {
@@ -142,17 +213,24 @@ PathResult MotionPlanner::planJoint(const JointVector& from, const JointVector& 
     return done(false, std::string("no collision-free joint path within ") + std::to_string(config_.planning_time) +
                            " s (" + st.asString() + ")");
   }
-  if (config_.simplify) ss.simplifySolution(std::max(0.01, config_.planning_time - (now() - t0)));
-  const og::PathGeometric& path = ss.getSolutionPath();
+  og::PathGeometric& path = ss.getSolutionPath();
+  if (config_.simplify) {
+    // vertices dropped where a straight joint edge is free (each try is one certified edge
+    // check), then shortcuts, within simplify_time
+    og::PathSimplifier ps(si);
+    const double t_end = now() + config_.simplify_time;
+    const ob::PlannerTerminationCondition ptc([&] { return now() > t_end; });
+    ps.reduceVertices(path);
+    if (!ptc) ps.shortcutPath(path, 0, 0, 0.33, 0.005);
+    ps.reduceVertices(path);
+  }
   for (std::size_t i = 0; i < path.getStateCount(); ++i) {
     const auto* v = path.getState(i)->as<ob::RealVectorStateSpace::StateType>();
     JointVector q;
     for (int k = 0; k < 6; ++k) q[k] = v->values[k];
     out.waypoints.push_back(q);
   }
-  // OMPL's motion validator works at its own resolution: the dense check is ours
-  CollisionReport where;
-  if (!pathValid(out.waypoints, ctx, 0, &where)) return done(false, "the sampled path failed the dense check: " + where.text());
+  // every edge of it passed the certified check (OMPL's motion validator is ours)
   return done(true, "");
 }
 

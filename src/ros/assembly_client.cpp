@@ -28,11 +28,10 @@ int main(int argc, char** argv) {
   cellsight_ros::param(pnh, "timeout", timeout);
   cellsight_ros::param(pnh, "detections_timeout", detections_timeout);
   cellsight_ros::param(pnh, "max_parts", max_parts);
-  std::atomic<bool> in_position{false};
-  std::atomic<int> in_position_msgs{0};
+  // io/in_position edges, counted: the motion has started (false) and ended (true)
+  std::atomic<int> falls{0}, rises{0};
   ros::Subscriber io = nh.subscribe<std_msgs::Bool>("io/in_position", 10, [&](const std_msgs::BoolConstPtr& m) {
-    in_position = m->data;
-    ++in_position_msgs;
+    ++(m->data ? rises : falls);
   });
   ros::AsyncSpinner spinner(1);
   spinner.start();
@@ -91,6 +90,7 @@ int main(int argc, char** argv) {
     }
     step["target"] = {{"xyz", {p.target.position.x, p.target.position.y, p.target.position.z}},
                       {"quat", {p.target.orientation.x, p.target.orientation.y, p.target.orientation.z, p.target.orientation.w}}};
+    const int falls_before = falls, rises_before = rises;
     cellsight::ExecutePlan exec;
     exec.request.plan = p;
     exec.request.time_scale = time_scale;
@@ -102,13 +102,13 @@ int main(int argc, char** argv) {
       failed = true;
       break;
     }
-    // in position again after the motion
+    // the robot leaves its position, then reports in position again after the motion
     const ros::WallTime t1 = ros::WallTime::now();
-    ros::WallDuration(0.2).sleep();
-    while (ros::ok() && !in_position && (ros::WallTime::now() - t1).toSec() < exec.response.expected_duration + timeout) {
+    auto moved = [&] { return falls > falls_before && rises > rises_before; };
+    while (ros::ok() && !moved() && (ros::WallTime::now() - t1).toSec() < exec.response.expected_duration + timeout) {
       ros::WallDuration(0.02).sleep();
     }
-    if (!in_position) {
+    if (!moved()) {
       ROS_ERROR("assembly_client: the robot did not report in position after '%s'", p.object.c_str());
       failed = true;
       break;

@@ -254,9 +254,9 @@ class CellSim {
       res.message = "grasp_index and release_index must lie in the trajectory, the grasp first";
       return true;
     }
-    if (!std::isfinite(req.time_scale) || req.time_scale < 0) {
+    if (!std::isfinite(req.time_scale) || req.time_scale < 0 || req.time_scale > 10) {
       res.status = R::REJECTED_INVALID;
-      res.message = "time_scale must be >= 0 (0: as planned)";
+      res.message = "time_scale must lie in [0, 10] (0: as planned)";
       return true;
     }
     for (const auto& q : traj.positions) {
@@ -310,12 +310,14 @@ class CellSim {
     }
     q_ = q;
     pose_ = arm_->fk(q);
-    // the jaws close at the grasp point and open at the release point, once each
-    const bool grasp = next_event_ == 0 && i > grasp_index_;
-    const bool release = next_event_ == 1 && i > release_index_;
+    // the jaws close at the grasp point and open at the release point, once each and in this
+    // order, even when one tick passes both (or the end)
     const bool done = i >= times.size();
+    const bool grasp = next_event_ == 0 && (i > grasp_index_ || done);
     if (grasp) next_event_ = 1;
+    const bool release = next_event_ == 1 && (i > release_index_ || done);
     if (release) next_event_ = 2;
+    const std::string object = exec_object_;
     if (done) {
       executing_ = false;
       q_ = traj_.positions.back();
@@ -323,17 +325,22 @@ class CellSim {
     }
     const cellsight::JointVector q_grasp = traj_.positions[grasp_index_], q_release = traj_.positions[release_index_];
     lock.unlock();
-    if (grasp) closeJaws(q_grasp);
-    if (release) openJaws(q_release, now);
+    try {
+      if (grasp) closeJaws(q_grasp);
+      if (release) openJaws(q_release, now, object);
+    } catch (const std::exception& e) {
+      ROS_ERROR("cell_sim: the jaws of '%s': %s (the part stays where it was)", object.c_str(), e.what());
+      held_ = -1;
+    }
     if (done) {
       setInPosition(true);
-      ROS_INFO("cell_sim: trajectory of '%s' executed", exec_object_.c_str());
+      ROS_INFO("cell_sim: trajectory of '%s' executed", object.c_str());
     }
   }
 
   /// Where the tcp really is when the controller is at `q` (the arm as built), move number `move`.
   Eigen::Isometry3d actualTcp(const cellsight::JointVector& q, uint64_t move) const {
-    return robot_.actual(arm_->fk(q), move) * arm_->toolTcp();
+    return robot_.actualAtJoints(q, move) * arm_->toolTcp();
   }
 
   void closeJaws(const cellsight::JointVector& q) {
@@ -364,7 +371,7 @@ class CellSim {
     ROS_INFO("cell_sim: the jaws closed on '%s'", s.objects[static_cast<size_t>(held_)].name.c_str());
   }
 
-  void openJaws(const cellsight::JointVector& q, const ros::Time& stamp) {
+  void openJaws(const cellsight::JointVector& q, const ros::Time& stamp, const std::string& plan_object) {
     if (held_ < 0) return;
     const Eigen::Isometry3d tcp = actualTcp(q, 7000000ull + moves_++);
     cellsight::Scene scene = geometry_->scene();
@@ -389,7 +396,7 @@ class CellSim {
       std::snprintf(line, sizeof line,
                     "{\"object\": \"%s\", \"model\": \"%s\", \"plan_object\": \"%s\", \"stamp_ns\": %lld, "
                     "\"pose\": {\"xyz\": [%.9f, %.9f, %.9f], \"quat\": [%.12f, %.12f, %.12f, %.12f]}}\n",
-                    o.name.c_str(), o.model.c_str(), exec_object_.c_str(), static_cast<long long>(cellsight_ros::toNanoseconds(stamp)),
+                    o.name.c_str(), o.model.c_str(), plan_object.c_str(), static_cast<long long>(cellsight_ros::toNanoseconds(stamp)),
                     t.x(), t.y(), t.z(), r.x(), r.y(), r.z(), r.w());
       placements_truth_ << line;
       placements_truth_.flush();

@@ -120,7 +120,7 @@ class GraspPlannerNode {
       ROS_WARN_THROTTLE(5, "grasp_planner: joint_states with non-finite positions ignored");
       return;
     }
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<std::mutex> lock(joints_mutex_);  // not mutex_: a plan in progress must not hold the joints up
     joints_ = q;
     joints_stamp_ = ros::Time::now();
   }
@@ -128,9 +128,9 @@ class GraspPlannerNode {
   /// Rebuilds the planner's world from the latest detections and cloud (mutex_ held). False with
   /// the reason when something is missing.
   bool updateScene(std::string* why) {
-    if (!scene_dirty_) return true;
     if (!detections_) return *why = "no detections received on " + detections_sub_.getTopic() + " yet: scan and locate first", false;
     if (!cloud_) return *why = "no scan received on " + cloud_sub_.getTopic() + " yet", false;
+    if (!scene_dirty_) return true;
     Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
     const std::string& frame = detections_->header.frame_id;
     if (!frame.empty() && frame != base_frame_) {
@@ -199,15 +199,25 @@ class GraspPlannerNode {
       ROS_INFO("grasp_planner: %s", res.message.c_str());
       return true;
     }
-    if (joints_stamp_.isZero() || (ros::Time::now() - joints_stamp_).toSec() > joint_state_timeout_) {
+    cellsight::JointVector start;
+    ros::Time joints_stamp;
+    {
+      std::lock_guard<std::mutex> jl(joints_mutex_);
+      start = joints_;
+      joints_stamp = joints_stamp_;
+    }
+    if (joints_stamp.isZero() || (ros::Time::now() - joints_stamp).toSec() > joint_state_timeout_) {
       return refuse("no joint state of the arm on " + joints_sub_.getTopic() + " for " + std::to_string(joint_state_timeout_) +
                     " s: the plan must start where the robot is");
     }
-    cellsight::PartPlan p = plan.object.empty() ? planner_->planNext(joints_, &index) : planner_->plan(index, joints_);
+    cellsight::PartPlan p = plan.object.empty() ? planner_->planNext(start, &index) : planner_->plan(index, start);
     plan = cellsight_ros::toGraspPlanMsg(p, arm_->jointNames(), base_frame_, ros::Time::now());
     if (p.status == cellsight::PlanStatus::kOk) {
       last_ok_[p.part.name] = p;
-      grasp_frames_[p.part.name] = p.poses[1].T_base_tcp;
+      {
+        std::lock_guard<std::mutex> tl(tf_mutex_);
+        grasp_frames_[p.part.name] = p.poses[1].T_base_tcp;
+      }
       res.message = "planned '" + p.part.name + "' (" + p.part.model + ") in " + std::to_string(p.seconds * 1e3) + " ms: " +
                     std::to_string(p.trajectory.duration()) + " s of motion";
       diag_.processed((ros::WallTime::now() - t0).toSec());
@@ -329,7 +339,7 @@ class GraspPlannerNode {
   }
 
   void onTfTimer(const ros::TimerEvent&) {
-    std::lock_guard<std::mutex> lock(mutex_);
+    std::lock_guard<std::mutex> lock(tf_mutex_);
     const ros::Time now = ros::Time::now();
     if (now == last_tf_) return;
     last_tf_ = now;
@@ -367,7 +377,9 @@ class GraspPlannerNode {
   ros::Subscriber detections_sub_, cloud_sub_, joints_sub_;
   ros::ServiceServer service_;
   ros::Timer tf_timer_;
-  std::mutex mutex_;
+  std::mutex mutex_;         // the planner, its world and the latest inputs
+  std::mutex joints_mutex_;  // joints_, joints_stamp_
+  std::mutex tf_mutex_;      // grasp_frames_, last_tf_
 };
 
 }  // namespace

@@ -133,9 +133,33 @@ Eigen::Isometry3d RobotErrorModel::actualSystematic(const Eigen::Isometry3d& com
                            std::to_string(commanded.translation().z()) + ")");
 }
 
-Eigen::Isometry3d RobotErrorModel::actual(const Eigen::Isometry3d& commanded, uint64_t move) const {
-  if (!config_.enabled) return commanded;
-  Eigen::Isometry3d T = actualSystematic(commanded);
+Eigen::Isometry3d RobotErrorModel::nominalAtJoints(const Eigen::Matrix<double, 6, 1>& q) const {
+  KDL::JntArray jq(6);
+  jq.data = q;
+  KDL::Frame F;
+  if (kdl_) {
+    std::lock_guard<std::mutex> lock(kdl_->mutex);
+    kdl_->fk_nominal.JntToCart(jq, F);
+  } else {
+    const KDL::Chain c = chainOf(nominalDh());
+    KDL::ChainFkSolverPos_recursive(c).JntToCart(jq, F);
+  }
+  return fromKdl(F);
+}
+
+Eigen::Isometry3d RobotErrorModel::actualAtJoints(const Eigen::Matrix<double, 6, 1>& q, uint64_t move) const {
+  if (!config_.enabled) return nominalAtJoints(q);
+  KDL::JntArray jq(6);
+  jq.data = q;
+  KDL::Frame F;
+  {
+    std::lock_guard<std::mutex> lock(kdl_->mutex);
+    kdl_->fk_built.JntToCart(jq, F);
+  }
+  return withScatter(fromKdl(F), move);
+}
+
+Eigen::Isometry3d RobotErrorModel::withScatter(Eigen::Isometry3d T, uint64_t move) const {
   std::mt19937_64 rng(mix(config_.seed ^ mix(move + 0x5151)));
   std::normal_distribution<double> n01(0.0, 1.0);
   const Eigen::Vector3d dp(n01(rng), n01(rng), n01(rng));
@@ -144,6 +168,11 @@ Eigen::Isometry3d RobotErrorModel::actual(const Eigen::Isometry3d& commanded, ui
   const Eigen::Vector3d w = dr * config_.repeatability_deg * kDeg;
   if (w.norm() > 0) T.linear() = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix() * T.linear();
   return T;
+}
+
+Eigen::Isometry3d RobotErrorModel::actual(const Eigen::Isometry3d& commanded, uint64_t move) const {
+  if (!config_.enabled) return commanded;
+  return withScatter(actualSystematic(commanded), move);
 }
 
 Eigen::Isometry3d RobotErrorModel::reported(const Eigen::Isometry3d& actual_pose) const {

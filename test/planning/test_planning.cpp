@@ -228,8 +228,18 @@ TEST(MotionPlanner, SamplesAroundAWallAndTheDenseCheckCatchesAnEdgeThroughIt) {
   ASSERT_TRUE(p.ok) << p.reason;
   EXPECT_TRUE(p.sampled);
   EXPECT_GT(p.waypoints.size(), 2u);
-  // every edge, re-checked twice as densely as planned
-  EXPECT_TRUE(mp.pathValid(p.waypoints, ctx, 0.005, &where)) << where.text();
+  // every edge, re-checked at 0.0005 rad with the bare shapes
+  CollisionWorld bare(w);
+  bare.setPadding(0);
+  const CollisionContext bare_ctx{&bare, 0.08, nullptr, -1};
+  EXPECT_TRUE(mp.pathValid(p.waypoints, bare_ctx, 0.0005, &where)) << where.text();
+  // the certified stepping keeps every point's travel per step within the padding
+  for (size_t i = 0; i + 1 < p.waypoints.size(); ++i) {
+    const JointVector d = p.waypoints[i + 1] - p.waypoints[i];
+    double sweep = 0;
+    for (int j = 0; j < 6; ++j) sweep += std::abs(d[j]) * mp.config().reach[static_cast<size_t>(j)];
+    EXPECT_LE(sweep / mp.certifiedSteps(p.waypoints[i], p.waypoints[i + 1], ctx), w.config().padding + 1e-12);
+  }
   // a path that cuts through the wall is caught
   std::vector<JointVector> cut = {p.waypoints.front(), p.waypoints.back()};
   EXPECT_FALSE(mp.pathValid(cut, ctx, 0.005));
@@ -301,23 +311,25 @@ TEST(GraspPlanner, PlansTheDemoAssemblyWithCollisionFreeEdges) {
     ++planned;
     ASSERT_EQ(p.poses.size(), 6u);
     ASSERT_EQ(p.segments.size(), 6u);
-    // the dense re-check: every segment's edges at 0.002 rad, in the world it was planned for
-    CollisionWorld w_carry(gp.world()), w_after(gp.world());
+    // the dense re-check: every segment's edges at 0.0005 rad, the bare shapes (no padding), in
+    // the world it was planned for; the carried part may touch nothing, not even the base part
+    CollisionWorld bare(gp.world());
+    bare.setPadding(0);
+    CollisionWorld w_carry(bare), w_after(bare);
     const CarriedPart carried{cell.models.at(p.part.model).second, p.poses[1].T_base_tcp.inverse() * p.part.pose, p.part.name};
     for (const PlanSegment& s : p.segments) {
       CollisionReport where;
-      CollisionContext ctx{&gp.world(), s.opening, s.carrying ? &carried : nullptr, -1};
+      CollisionContext ctx{&bare, s.opening, s.carrying ? &carried : nullptr, -1};
       if (s.carrying) {
         // the part is out of the world while it is held (its object id is its index here)
         w_carry.removeObject(static_cast<int>(idx));
         ctx.world = &w_carry;
-        if (s.name == "insert") ctx.ignore_object = 0;  // the bracket, the base part
       }
       if (s.name == "retreat") {
         w_after.moveObject(static_cast<int>(idx), p.T_base_target);
         ctx.world = &w_after;
       }
-      EXPECT_TRUE(checker.pathValid(s.path, ctx, 0.002, &where)) << p.part.name << " " << s.name << ": " << where.text();
+      EXPECT_TRUE(checker.pathValid(s.path, ctx, 0.0005, &where)) << p.part.name << " " << s.name << ": " << where.text();
     }
     // the grasp and the release are where the plan says, and the named poses chain up
     EXPECT_LT(((arm().fk(p.trajectory.positions[p.grasp_index]) * arm().toolTcp()).translation() -

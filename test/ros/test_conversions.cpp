@@ -111,3 +111,60 @@ TEST(Conversions, HugeCameraInfoIsRefused) {
   ci.width = ci.height = 60000;
   EXPECT_NE(errorOf([&] { fromCameraInfo(ci); }).find("over the limit"), std::string::npos);
 }
+
+TEST(Conversions, GraspPlanTrajectoryRoundTripAndRefusals) {
+  const std::array<std::string, 6> names{"joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6"};
+  cellsight::PartPlan p;
+  p.status = cellsight::PlanStatus::kOk;
+  p.part = {"housing_0", "housing", Eigen::Isometry3d(Eigen::Translation3d(0.5, 0.1, 0))};
+  p.poses = {{"grasp", Eigen::Isometry3d(Eigen::Translation3d(0.5, 0.1, 0.02)), cellsight::JointVector::Zero()}};
+  p.T_base_target = Eigen::Isometry3d(Eigen::Translation3d(0.3, 0.0, 0));
+  for (int i = 0; i < 5; ++i) {
+    p.trajectory.positions.push_back(cellsight::JointVector::Constant(0.1 * i));
+    p.trajectory.velocities.push_back(cellsight::JointVector::Constant(0.2));
+    p.trajectory.times.push_back(0.5 * i);
+  }
+  p.grasp_index = 1;
+  p.release_index = 3;
+  p.passed_over = {"blade_0: unreachable: far away"};
+  const cellsight::GraspPlan m = toGraspPlanMsg(p, names, "base_link", ros::Time(3, 0));
+  EXPECT_EQ(m.status, cellsight::GraspPlan::OK);
+  EXPECT_EQ(m.object, "housing_0");
+  EXPECT_EQ(m.passed_over.size(), 1u);
+  EXPECT_NEAR(fromPoseMsg(m.target).translation().x(), 0.3, 1e-12);
+  const cellsight::TimedTrajectory t = fromTrajectoryMsg(m.trajectory, names);
+  ASSERT_EQ(t.positions.size(), 5u);
+  for (size_t i = 0; i < 5; ++i) {
+    EXPECT_LT((t.positions[i] - p.trajectory.positions[i]).norm(), 1e-12);
+    EXPECT_NEAR(t.times[i], p.trajectory.times[i], 1e-9);
+  }
+  // joints in another order are read by name
+  auto shuffled = m.trajectory;
+  std::swap(shuffled.joint_names[0], shuffled.joint_names[5]);
+  for (auto& pt : shuffled.points) {
+    std::swap(pt.positions[0], pt.positions[5]);
+    pt.positions[0] += 1.0;  // now joint_6's column
+  }
+  EXPECT_NEAR(fromTrajectoryMsg(shuffled, names).positions[2][5], 0.2 + 1.0, 1e-12);
+  auto bad = m.trajectory;
+  bad.joint_names[2] = "elbow";
+  EXPECT_NE(errorOf([&] { fromTrajectoryMsg(bad, names); }).find("no joint 'joint_3'"), std::string::npos);
+  bad = m.trajectory;
+  bad.points[2].time_from_start = bad.points[1].time_from_start;
+  EXPECT_NE(errorOf([&] { fromTrajectoryMsg(bad, names); }).find("times must increase"), std::string::npos);
+  bad = m.trajectory;
+  bad.points[4].positions[1] = std::nan("");
+  EXPECT_NE(errorOf([&] { fromTrajectoryMsg(bad, names); }).find("not finite"), std::string::npos);
+  bad = m.trajectory;
+  bad.points[0].positions.pop_back();
+  EXPECT_NE(errorOf([&] { fromTrajectoryMsg(bad, names); }).find("5 positions"), std::string::npos);
+  bad.points.clear();
+  EXPECT_NE(errorOf([&] { fromTrajectoryMsg(bad, names); }).find("no points"), std::string::npos);
+  // a refusal carries its reason and no trajectory
+  p.status = cellsight::PlanStatus::kNoPath;
+  p.reason = "carried housing vs object blade";
+  const cellsight::GraspPlan r = toGraspPlanMsg(p, names, "base_link", ros::Time(3, 0));
+  EXPECT_EQ(r.status, cellsight::GraspPlan::NO_PATH);
+  EXPECT_EQ(r.reason, p.reason);
+  EXPECT_TRUE(r.trajectory.points.empty());
+}

@@ -49,9 +49,10 @@ struct CycleReport {
   std::map<std::string, std::pair<double, double>> locate_errors;
 };
 
-/// Where the true part ends when `plan` is executed by `robot` (commanded flange = the nominal
-/// forward kinematics of the plan's joints at the grasp and at the release; the part rides rigidly
-/// in the jaws from the grasp on). Move numbers `move` and `move + 1` draw the repeatability.
+/// Where the true part ends when `plan` is executed by `robot` (the controller holds the plan's
+/// joints at the grasp and at the release, the arm as built takes the flange where they lead; the
+/// part rides rigidly in the jaws from the grasp on). Move numbers `move` and `move + 1` draw the
+/// repeatability.
 /// Placed vs target: centroid offset (m) and rotation vector (rad, base frame) with the part's
 /// symmetry taken out (the equivalent target nearest the placed pose; for an axial part the
 /// turn about its axis is dropped).

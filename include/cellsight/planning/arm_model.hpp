@@ -23,7 +23,7 @@ struct CollisionShape {
   Eigen::Vector3d size = Eigen::Vector3d::Zero();  ///< box: x y z; cylinder: radius, length, 0; sphere: radius
   Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();
   std::string link;
-  int chain_index = 0;  ///< pose = chain frame `chain_index` (0 = base, 6 = tool0) · `in_chain`
+  int chain_index = 0;  ///< pose = chain frame `chain_index` (0 = base_link, 1..6 = link_1..6, 7 = tool0) · `in_chain`
   Eigen::Isometry3d in_chain = Eigen::Isometry3d::Identity();  ///< link frame in that chain frame at q = 0
   bool finger = false;  ///< a finger: its link slides along `slide_axis` (link frame) by half the opening
   Eigen::Vector3d slide_axis = Eigen::Vector3d::Zero();
@@ -35,6 +35,7 @@ struct IkConfig {
   double rotation_tolerance = 1e-5;   ///< rad
 };
 
+/// Not re-entrant (the KDL solvers keep scratch state): one ArmModel per thread.
 class ArmModel {
  public:
   /// Reads a URDF file: the chain from `base_link` to `tool0`, the `tcp` link (fixed on tool0) and
@@ -59,7 +60,7 @@ class ArmModel {
 
   /// tool0 (= flange) in base_link.
   Eigen::Isometry3d fk(const JointVector& q) const;
-  /// Chain frames 0..6 (0 = base_link, 6 = tool0) in base_link.
+  /// Chain frames in base_link: 0 = base_link, 1..6 = link_1..link_6, 7 = tool0 (one per KDL segment).
   Isometries chainFrames(const JointVector& q) const;
   /// Each shape's pose in base_link (fingers opened to `opening`, metres between the pads).
   Isometries shapePoses(const JointVector& q, double opening) const;

@@ -19,21 +19,27 @@ struct CollisionWorldConfig {
   double table_margin = 0.003;       ///< m: scan points lower than table z + this are the table
   double explained_margin = 0.004;   ///< m: scan points this close to a located part are that part
   double padding = 0.002;            ///< m added around the arm's and gripper's shapes
-  /// m: the carried part may sink this far into the table and into the object it is inserted
-  /// into (the parts rest on the table; insertion is contact) without counting as a collision
-  double contact_allowance = 0.002;
+  /// m: the carried part may sink this far into the table without counting as a collision (the
+  /// parts rest on it; a located pose may lie a little low). The object a part is inserted into
+  /// is left out of check() by `ignore_object` (GraspPlanner: on the insertion's last stretch only).
+  double contact_allowance = 0.004;
   int min_voxel_points = 2;          ///< scan points needed before a voxel counts as occupied
 };
 
 /// What collides with what (empty when nothing does).
 struct CollisionReport {
   bool collides = false;
+  /// m: when free, a lower bound of the gap between the padded shapes and everything they were
+  /// checked against (bounding-box distances; 0 when a box overlaps one; pairs of moving shapes
+  /// count half). The motion may move every point this far (plus the padding) before the next check.
+  double clearance = 0;
   std::string first;   ///< e.g. "finger_left" or "carried part"
   std::string second;  ///< e.g. "scan voxels", "table", "object housing", "link_1"
   std::string text() const { return collides ? first + " vs " + second : "free"; }
 };
 
-/// A part held in the gripper: its mesh and its pose in the tcp frame.
+/// A part held in the gripper: its mesh and its pose in the tcp frame. It is checked as its
+/// bounding box in the model frame, padded like the arm (conservative for concave parts).
 struct CarriedPart {
   std::shared_ptr<const TriangleMesh> mesh;
   Eigen::Isometry3d T_tcp_part = Eigen::Isometry3d::Identity();
@@ -71,6 +77,8 @@ class CollisionWorld {
   long long checks() const { return checks_; }
 
   const CollisionWorldConfig& config() const { return config_; }
+  /// Another padding around the arm's shapes from now on (0: the bare shapes, for re-checks).
+  void setPadding(double padding);
 
  private:
   CollisionWorldConfig config_;

@@ -27,6 +27,11 @@ struct AssemblyConfig {
   double lift_height = 0.06;          ///< m, straight up after closing the jaws
   double preplace_distance = 0.04;    ///< m, before the target against v_i
   double retreat_distance = 0.05;     ///< m, back along the tool axis after opening
+  /// m: the carried part may touch the part it is inserted into only on the insertion's last
+  /// stretch this long (contact at the target); before it, it is checked like any obstacle
+  double insert_contact_distance = 0.003;
+  /// a located part this close to its target (m, and rad about it, symmetry-aware) is placed
+  double placed_tolerance = 0.003, placed_tolerance_rad = 0.05;
   double min_approach_down = -0.1;    ///< the tool axis' downward component at least this (no grasp from below)
   int max_candidates = 40;            ///< grasp candidates fully planned per part before giving up
   JointVector home = (JointVector() << 0.0, 0.5, 0.64, 0.0, 0.43, 0.0).finished();  ///< rad: flange down above the table
@@ -90,7 +95,8 @@ class GraspPlanner {
                const MotionPlannerConfig& motion, std::map<std::string, std::pair<ModelInfo, std::shared_ptr<const TriangleMesh>>> models);
 
   /// The collision world for a scene: the table, every located part of a known model as its
-  /// mesh, and the scan points they leave unexplained. Remembers which object each part is.
+  /// mesh, and the scan points they leave unexplained. Remembers which object each part is. A
+  /// part located at its target already (placed_tolerance: e.g. after a rescan) counts as placed.
   void setScene(CollisionWorld world, const std::vector<LocatedPart>& parts, const std::vector<Eigen::Vector3f>& scan);
   const CollisionWorld& world() const { return *world_; }
   const std::vector<LocatedPart>& parts() const { return parts_; }

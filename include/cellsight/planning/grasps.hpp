@@ -49,9 +49,10 @@ std::vector<GraspCandidate> graspCandidates(const ModelInfo& info, const Triangl
 GraspCandidate measureGrasp(const TriangleMesh& mesh, const Eigen::Isometry3d& T_model_tcp, const GripperConfig& config,
                             const std::string& source);
 
-/// The rotations of the model frame that leave the part unchanged (identity first): discrete
-/// order n gives n, axial `axial_steps`, none 1; spherical gives `axial_steps` turns about z.
-std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> symmetryRotations(const ModelInfo& info,
-                                                                                                int axial_steps);
+/// The motions of the model frame that leave the part unchanged (identity first): discrete
+/// order n gives n turns about the axis through the model origin, axial `axial_steps`, none 1;
+/// spherical gives `axial_steps` turns about z through `centroid` (the sphere's centre).
+std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> symmetryRotations(
+    const ModelInfo& info, int axial_steps, const Eigen::Vector3d& centroid = Eigen::Vector3d::Zero());
 
 }  // namespace cellsight

@@ -5,6 +5,7 @@
 // resolution. Time parameterisation within the joint velocity and acceleration limits.
 // OMPL stays behind this interface.
 #pragma once
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -16,12 +17,21 @@ namespace cellsight {
 
 struct MotionPlannerConfig {
   double planning_time = 0.5;      ///< s per OMPL query
-  double edge_resolution = 0.01;   ///< rad: edges are checked at most this joint step apart
+  /// Edges are checked at steps that move no point of the arm, the gripper or a carried part
+  /// farther than the collision padding (CollisionWorldConfig::padding): the padded shapes at
+  /// the steps then cover the unpadded ones in between. The bound per joint j is
+  /// |Δq_j| · reach[j] (reach: the farthest point beyond joint j's axis, carried part included).
+  /// A step is also never longer than edge_resolution (rad).
+  double edge_resolution = 0.05;
+  /// m: this arm (0.9 m reach) with its gripper and a part reaching 0.1 m beyond the tcp
+  std::array<double, 6> reach = {1.25, 1.2, 0.82, 0.35, 0.35, 0.15};
   double cartesian_step = 0.002;   ///< m (and cartesian_step / 0.05 rad) between Cartesian IK points
   double max_joint_jump = 0.1;     ///< rad between consecutive Cartesian IK solutions
   bool direct_first = true;        ///< try the straight joint edge before sampling
   bool simplify = true;            ///< OMPL's PathSimplifier on RRTConnect's path
-  std::string planner = "rrtconnect";  ///< rrtconnect | rrt | prm (peers: see bench_planning)
+  double simplify_time = 0.03;     ///< s the simplifier may take per path
+  /// rrtconnect | rrt | prm; straight: the straight joint edge or nothing (peers: bench_planning)
+  std::string planner = "rrtconnect";
   double velocity_scale = 0.5;     ///< share of the URDF joint velocity limits used
   double acceleration = 3.0;       ///< rad/s², every joint
 };
@@ -61,8 +71,9 @@ class MotionPlanner {
                            const CollisionContext& ctx) const;
   /// The state check every planner uses.
   CollisionReport checkState(const JointVector& q, const CollisionContext& ctx) const;
-  /// Dense check of the straight joint edge a → b at `resolution` rad (≤ 0: the configured one):
-  /// within limits and collision-free at every step. Fills `where` with the first bad step.
+  /// Check of the straight joint edge a → b: within limits and collision-free at every step.
+  /// `resolution` ≤ 0: the certified stepping above; > 0: at most that many rad per step (a
+  /// re-check). Fills `where` with the first bad step.
   bool edgeValid(const JointVector& a, const JointVector& b, const CollisionContext& ctx, double resolution = 0,
                  CollisionReport* where = nullptr) const;
   /// Every edge of a path, densely.
@@ -71,6 +82,8 @@ class MotionPlanner {
 
   /// Joint-space path: stops at every waypoint (trapezoid per edge, joints synchronised).
   TimedTrajectory timeJointPath(const std::vector<JointVector>& path) const;
+  /// Steps the certified check takes on the edge a → b.
+  int certifiedSteps(const JointVector& a, const JointVector& b, const CollisionContext& ctx) const;
   /// Dense smooth path (Cartesian): one trapezoid along the path's length.
   TimedTrajectory timeSmoothPath(const std::vector<JointVector>& path) const;
 

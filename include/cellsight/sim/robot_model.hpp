@@ -44,6 +44,13 @@ class RobotErrorModel {
   /// `move` (the repeatability scatter is drawn per move, reproducibly). Identity map when
   /// disabled. Throws std::runtime_error if the nominal arm cannot reach `commanded`.
   Eigen::Isometry3d actual(const Eigen::Isometry3d& commanded, uint64_t move) const;
+  /// Where the flange really is when the controller holds the joints at `q` (standard DH, the
+  /// nominal arm's joint convention; the URDF's joints are the same): the arm as built plus the
+  /// per-move scatter; the nominal forward kinematics when disabled. No inverse kinematics, so no
+  /// branch ambiguity: what a joint-space program (a grasp plan) really reaches.
+  Eigen::Isometry3d actualAtJoints(const Eigen::Matrix<double, 6, 1>& q, uint64_t move) const;
+  /// The nominal arm's flange at joints `q`.
+  Eigen::Isometry3d nominalAtJoints(const Eigen::Matrix<double, 6, 1>& q) const;
   /// The systematic part only (no scatter).
   Eigen::Isometry3d actualSystematic(const Eigen::Isometry3d& commanded) const;
   /// What the controller reports when its flange really is at `actual_pose` (the inverse map,
@@ -51,6 +58,7 @@ class RobotErrorModel {
   Eigen::Isometry3d reported(const Eigen::Isometry3d& actual_pose) const;
 
  private:
+  Eigen::Isometry3d withScatter(Eigen::Isometry3d T, uint64_t move) const;
   RobotErrorConfig config_;
   std::array<DhRow, 6> built_{};
   struct Kdl;
