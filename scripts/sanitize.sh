@@ -12,7 +12,7 @@ BUILD=$(realpath -m "${1:-_build_san}")
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 # shellcheck disable=SC1091
 source "$ROOT/scripts/report-failure.sh"
-TESTS="test_common test_sim test_scanner test_localization test_eval test_scanner_acceptance test_ros_conversions test_fixtures test_bridge"
+TESTS="test_common test_sim test_scanner test_localization test_eval test_scanner_acceptance test_ros_conversions test_fixtures test_bridge test_planning"
 # Under ASan + UBSan + libFuzzer coverage, model matching runs ~50x slower: the long matching
 # runs of test_localization (10 min on 2 cores; the flat-view and see-through tests, 25 s, stay)
 # and the two demo-scan localisation tests of test_scanner_acceptance (4 min) are left out unless

@@ -45,7 +45,7 @@ struct CyclesOptions {
   std::string root = ".", scene = "config/scenes/demo.yaml", calibration, json_path;
   int cycles = 20;
   long first_seed = 1;
-  double limit_sigma_mm = 0, limit_sigma_deg = 0, limit_median_plan_ms = 0, limit_success = 0;
+  double limit_sigma_mm = 0, limit_sigma_deg = 0, limit_median_plan_ms = 0, limit_success = 0, limit_max_mm = 0;
   bool exact_robot = false, true_poses = false;
   std::string trajectory = "demo_sweep";
 };
@@ -152,6 +152,13 @@ int runCycles(const CyclesOptions& o) {
   }
   if (o.limit_median_plan_ms > 0 && median(plan_ms) > o.limit_median_plan_ms) {
     std::snprintf(buf, sizeof buf, "median planning time %.1f ms > %.1f ms", median(plan_ms), o.limit_median_plan_ms);
+    failed.push_back(buf);
+  }
+  double worst_t = 0;
+  for (const auto& [model, e] : terr) worst_t = std::max(worst_t, *std::max_element(e.begin(), e.end()));
+  out["max_t_err_mm"] = worst_t;
+  if (o.limit_max_mm > 0 && worst_t > o.limit_max_mm) {
+    std::snprintf(buf, sizeof buf, "largest placement error %.4f mm > %.4f mm", worst_t, o.limit_max_mm);
     failed.push_back(buf);
   }
   if (o.limit_success > 0 && out["success_rate"].get<double>() < o.limit_success) {
@@ -332,6 +339,8 @@ int main(int argc, char** argv) {
   cycles->add_option("--limit-sigma-deg", co.limit_sigma_deg, "exit 3 when a rotation sigma exceeds this (deg)")
       ->check(cellsight_tools::nonNegative());
   cycles->add_option("--limit-median-plan-ms", co.limit_median_plan_ms, "exit 3 when the median planning time per part exceeds this")
+      ->check(cellsight_tools::nonNegative());
+  cycles->add_option("--limit-max-mm", co.limit_max_mm, "exit 3 when a placement error exceeds this (mm)")
       ->check(cellsight_tools::nonNegative());
   cycles->add_option("--limit-success", co.limit_success, "exit 3 when fewer placements than this share succeed")
       ->check(cellsight_tools::fraction());
