@@ -33,6 +33,9 @@ check "calibrate --square 25mm" 1 "--square" "$BIN/cellsight_calibrate" intrinsi
 check "calibrate unknown subcommand" 1 "intrinsic" "$BIN/cellsight_calibrate" intrinsic
 check "evaluate_localization occlusion --help" 0 "--trials" "$BIN/cellsight_evaluate_localization" occlusion --help
 check "scanner_accuracy sim --help" 0 "--scene" "$BIN/cellsight_scanner_accuracy" sim --help
+check "plan cycles --help" 0 "--limit-sigma-mm" "$BIN/cellsight_plan" cycles --help
+check "plan cycles --cycels" 1 "--cycels" "$BIN/cellsight_plan" cycles --cycels 3
+check "plan cycles --cycles 0" 1 "--cycles" "$BIN/cellsight_plan" cycles --cycles 0
 # validate_config: a bad file is reported as ERROR only, never "ok" first
 BAD=$(mktemp -d)
 printf 'outlier_k: -5\n' >"$BAD/scanner.yaml"

@@ -13,25 +13,11 @@
 #include <sstream>
 
 #include "cellsight/common/errors.hpp"
+#include "cellsight/common/kdl_eigen.hpp"
 
 namespace cellsight {
 
 namespace {
-
-Eigen::Isometry3d fromKdl(const KDL::Frame& F) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  for (int i = 0; i < 3; ++i) {
-    T.translation()(i) = F.p(i);
-    for (int j = 0; j < 3; ++j) T.linear()(i, j) = F.M(i, j);
-  }
-  return T;
-}
-
-KDL::Frame toKdl(const Eigen::Isometry3d& T) {
-  const Eigen::Matrix3d R = T.linear();
-  return KDL::Frame(KDL::Rotation(R(0, 0), R(0, 1), R(0, 2), R(1, 0), R(1, 1), R(1, 2), R(2, 0), R(2, 1), R(2, 2)),
-                    KDL::Vector(T.translation().x(), T.translation().y(), T.translation().z()));
-}
 
 Eigen::Isometry3d fromUrdf(const urdf::Pose& p) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();

@@ -76,6 +76,13 @@ class CertifiedMotionValidator : public ob::MotionValidator {
   CollisionContext ctx_;
 };
 
+PathResult finished(PathResult& out, double t0, bool ok, const std::string& reason) {
+  out.ok = ok;
+  out.reason = reason;
+  out.seconds = now() - t0;
+  return out;
+}
+
 }  // namespace
 
 MotionPlanner::MotionPlanner(const ArmModel& arm, const MotionPlannerConfig& config) : arm_(arm), config_(config) {
@@ -163,12 +170,7 @@ bool MotionPlanner::pathValid(const std::vector<JointVector>& path, const Collis
 PathResult MotionPlanner::planJoint(const JointVector& from, const JointVector& to, const CollisionContext& ctx) const {
   const double t0 = now();
   PathResult out;
-  auto done = [&](bool ok, const std::string& reason) {
-    out.ok = ok;
-    out.reason = reason;
-    out.seconds = now() - t0;
-    return out;
-  };
+  auto done = [&](bool ok, const std::string& reason) { return finished(out, t0, ok, reason); };
   CollisionReport r = checkState(from, ctx);
   if (r.collides) return done(false, "the start collides: " + r.text());
   r = checkState(to, ctx);
@@ -238,12 +240,7 @@ PathResult MotionPlanner::planCartesian(const JointVector& from, const Eigen::Is
                                         const CollisionContext& ctx) const {
   const double t0 = now();
   PathResult out;
-  auto done = [&](bool ok, const std::string& reason) {
-    out.ok = ok;
-    out.reason = reason;
-    out.seconds = now() - t0;
-    return out;
-  };
+  auto done = [&](bool ok, const std::string& reason) { return finished(out, t0, ok, reason); };
   const Eigen::Isometry3d start = arm_.fk(from);
   const Eigen::Quaterniond qa(start.linear()), qb(target.linear());
   const double dist = (target.translation() - start.translation()).norm();

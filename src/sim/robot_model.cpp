@@ -1,5 +1,7 @@
 #include "cellsight/sim/robot_model.hpp"
 
+#include "cellsight/common/kdl_eigen.hpp"
+
 #include <kdl/chain.hpp>
 #include <kdl/chainfksolverpos_recursive.hpp>
 #include <kdl/chainiksolverpos_lma.hpp>
@@ -25,21 +27,6 @@ KDL::Chain chainOf(const std::array<DhRow, 6>& dh) {
     c.addSegment(KDL::Segment(KDL::Joint(KDL::Joint::RotZ), KDL::Frame::DH(r.a, r.alpha, r.d, r.theta)));
   }
   return c;
-}
-
-KDL::Frame toKdl(const Eigen::Isometry3d& T) {
-  const Eigen::Matrix3d R = T.linear();
-  return KDL::Frame(KDL::Rotation(R(0, 0), R(0, 1), R(0, 2), R(1, 0), R(1, 1), R(1, 2), R(2, 0), R(2, 1), R(2, 2)),
-                    KDL::Vector(T.translation().x(), T.translation().y(), T.translation().z()));
-}
-
-Eigen::Isometry3d fromKdl(const KDL::Frame& F) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  for (int i = 0; i < 3; ++i) {
-    T.translation()(i) = F.p(i);
-    for (int j = 0; j < 3; ++j) T.linear()(i, j) = F.M(i, j);
-  }
-  return T;
 }
 
 uint64_t mix(uint64_t x) {

@@ -20,6 +20,7 @@
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/common/yaml_reader.hpp"
 #include "cellsight/fixtures/fixture_registry.hpp"
+#include "cellsight/planning/grasp_planner.hpp"
 #include "cli_args.hpp"
 
 namespace {
@@ -92,6 +93,10 @@ std::string validateFile(const std::string& f) {
       m.fail("seeds", "must be a non-empty list of distinct integers");
     m.finish();
     return std::to_string(seeds.size()) + " held-out seeds on " + base;
+  }
+  if (node.IsMap() && node["base_model"]) {
+    const auto a = cellsight::loadAssemblyConfig(f);
+    return "assembly: base '" + a.base_model + "', " + std::to_string(a.order.size()) + " parts placed";
   }
   if (f.size() >= 10 && f.substr(f.size() - 10) == "model.yaml") {
     return "model '" + cellsight::loadModelInfo(f).id + "'";
