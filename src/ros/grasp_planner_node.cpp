@@ -318,6 +318,29 @@ class GraspPlannerNode {
       a.color.b = 1.0f;
       arr.markers.push_back(a);
     }
+    // the part's grasp candidates that fit the jaws (every 20th, up to 60): short lines along
+    // the approach ending at the tcp, the chosen one drawn by the poses above
+    visualization_msgs::Marker cands = marker("candidates", 0, visualization_msgs::Marker::LINE_LIST);
+    cands.scale.x = 0.0008;
+    cands.color.r = 0.9f;
+    cands.color.g = 0.9f;
+    cands.color.b = 0.2f;
+    cands.color.a = 0.7f;
+    const auto& all = planner_->candidates(p.part.model);
+    for (size_t i = 0, shown = 0; i < all.size() && shown < 60; i += 20) {
+      if (!all[i].valid) continue;
+      const Eigen::Isometry3d T = p.part.pose * all[i].T_model_tcp;
+      for (const Eigen::Vector3d& v : {Eigen::Vector3d(T.translation() - 0.02 * T.linear().col(2)), Eigen::Vector3d(T.translation())}) {
+        geometry_msgs::Point pt;
+        pt.x = v.x();
+        pt.y = v.y();
+        pt.z = v.z();
+        cands.points.push_back(pt);
+      }
+      ++shown;
+    }
+    if (cands.points.empty()) cands.action = visualization_msgs::Marker::DELETE;
+    arr.markers.push_back(cands);
     visualization_msgs::Marker target = marker("target", 0, visualization_msgs::Marker::TRIANGLE_LIST);
     target.pose = cellsight_ros::toPoseMsg(p.T_base_target);
     const auto& mesh = *models_.at(p.part.model).second;
