@@ -29,6 +29,7 @@ PACKAGES=(
   libcli11-dev gnuplot-nox libassimp-dev liborocos-kdl-dev
   # planning: the arm's URDF and kinematics, the collision map, collision checks, paths; rviz's robot
   liburdfdom-dev libkdl-parser-dev liboctomap-dev libfcl-dev libompl-dev libtrajectory-msgs-dev ros-trajectory-msgs
+  python3-trajectory-msgs
   ros-robot-state-publisher
   # headless rviz screenshots
   xvfb x11-utils imagemagick libgl1-mesa-dri mesa-utils
