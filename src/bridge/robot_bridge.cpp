@@ -189,8 +189,11 @@ void RobotBridge::work() {
     for (char& c : reply) {
       if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) > 0x7e) c = ' ';
     }
-    server_->send(client, reply);
+    // the reply queued and the client free again in one step: a controller that sends its next
+    // request as soon as the reply arrives must not find the previous one still "running"
+    // (lock order as in onLine: this mutex, then the server's)
     std::lock_guard<std::mutex> lock(mutex_);
+    server_->send(client, reply);
     if (busy_.count(client)) busy_[client] = false;
   }
 }
