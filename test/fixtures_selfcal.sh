@@ -15,10 +15,9 @@ WORK=$2
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 rm -rf "$WORK"
 mkdir -p "$WORK"
-"$TOOLS/cellsight_simulate_captures" --scene "$ROOT/config/scenes/demo.yaml" --out "$WORK/captures" >"$WORK/captures.json" ||
-  { echo "FAIL: simulated captures"; exit 1; }
-bash "$ROOT/scripts/calibrate-captures.sh" "$TOOLS" "$WORK/captures" "$WORK/calibration" ||
-  { echo "FAIL: calibration (logs in $WORK/logs)"; exit 1; }
+# shellcheck source=test/calibrated_demo_cell.sh
+source "$ROOT/test/calibrated_demo_cell.sh"
+calibrate_demo_cell "$TOOLS" "$ROOT" "$WORK" || exit 1
 "$TOOLS/cellsight_qr_fixtures" sim --scene "$ROOT/config/scenes/demo.yaml" --registry "$ROOT/config/fixtures.yaml" \
   --calibration "$WORK/calibration" --renders 100 --json "$WORK/fixtures.json" >/dev/null ||
   { echo "FAIL: cellsight_qr_fixtures sim"; exit 1; }

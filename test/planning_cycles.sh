@@ -14,10 +14,9 @@ WORK=$2
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 rm -rf "$WORK"
 mkdir -p "$WORK"
-"$TOOLS/cellsight_simulate_captures" --scene "$ROOT/config/scenes/demo.yaml" --out "$WORK/captures" >"$WORK/captures.json" ||
-  { echo "FAIL: simulated captures"; exit 1; }
-bash "$ROOT/scripts/calibrate-captures.sh" "$TOOLS" "$WORK/captures" "$WORK/calibration" ||
-  { echo "FAIL: calibration (logs in $WORK/logs)"; exit 1; }
+# shellcheck source=test/calibrated_demo_cell.sh
+source "$ROOT/test/calibrated_demo_cell.sh"
+calibrate_demo_cell "$TOOLS" "$ROOT" "$WORK" || exit 1
 taskset -c 0 "$TOOLS/cellsight_plan" cycles --root "$ROOT" --cycles 3 --true-poses --exact-robot \
   --calibration "$WORK/calibration" --limit-max-mm 0.001 --limit-success 1 --json "$WORK/chain.json" ||
   { echo "FAIL: the planning chain on true poses with an exact robot (see $WORK/chain.json)"; exit 1; }

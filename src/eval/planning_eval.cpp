@@ -101,8 +101,6 @@ PlanningEvaluation::PlanningEvaluation(const PlanningEvalConfig& config) : impl_
 
 PlanningEvaluation::~PlanningEvaluation() = default;
 
-const ArmModel& PlanningEvaluation::arm() const { return *impl_->arm; }
-
 CycleReport PlanningEvaluation::run(uint64_t seed) {
   Impl& m = *impl_;
   CycleReport rep;

@@ -262,7 +262,6 @@ CollisionReport CollisionWorld::check(const ArmModel& arm, const JointVector& q,
       gap = std::min(gap, weight * d);
       return false;
     }
-    ++checks_;
     fcl::CollisionResultd res;
     fcl::collide(&a, &b, req, res);
     if (res.isCollision()) return true;

@@ -70,7 +70,6 @@ class GraspPlannerNode {
     cellsight_ros::param(pnh, "edge_resolution", motion.edge_resolution);
     cellsight_ros::param(pnh, "velocity_scale", motion.velocity_scale);
     const cellsight::AssemblyConfig assembly = cellsight::loadAssemblyConfig(assembly_file);
-    home_ = assembly.home;
     const cellsight::ModelLibrary lib(models);
     for (const std::string& id : lib.ids()) {
       const auto& e = lib.model(id);
@@ -386,7 +385,7 @@ class GraspPlannerNode {
   std::string base_frame_ = "base_link", output_file_;
   double joint_state_timeout_ = 1.0, tf_timeout_ = 0.5, table_z_ = 0.0;
   Eigen::Vector2d table_center_, table_size_;
-  cellsight::JointVector home_, joints_ = cellsight::JointVector::Zero();
+  cellsight::JointVector joints_ = cellsight::JointVector::Zero();
   ros::Time joints_stamp_, last_tf_;
   cellsight::DetectionArrayConstPtr detections_;
   sensor_msgs::PointCloud2ConstPtr cloud_;

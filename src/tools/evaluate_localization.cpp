@@ -88,16 +88,8 @@ std::vector<std::string> nonEmpty(const std::vector<std::string>& v) {
   return out;
 }
 
-double median(std::vector<double> v) {
-  if (v.empty()) return NAN;
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
-
-void writeJson(const std::string& path, const json& j) {
-  if (path.empty()) return;
-  writeFileAtomic(path, j.dump(2) + "\n");
-}
+using cellsight_tools::median;
+using cellsight_tools::writeJson;
 
 struct Setup {
   std::shared_ptr<const ModelLibrary> lib;

@@ -17,17 +17,15 @@
 #include "cellsight/eval/planning_eval.hpp"
 #include "cellsight/sim/scene.hpp"
 #include "cli_args.hpp"
+#include "json_pose.hpp"
 
 using namespace cellsight;
 using json = nlohmann::json;
 
 namespace {
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
+using cellsight_tools::median;
+using cellsight_tools::writeJson;
 
 double stddev(const std::vector<double>& v) {
   if (v.size() < 2) return 0;
@@ -35,10 +33,6 @@ double stddev(const std::vector<double>& v) {
   double s = 0;
   for (double x : v) s += (x - m) * (x - m);
   return std::sqrt(s / static_cast<double>(v.size() - 1));
-}
-
-void writeJson(const std::string& path, const json& j) {
-  if (!path.empty()) writeFileAtomic(path, j.dump(2) + "\n");
 }
 
 struct CyclesOptions {
@@ -224,17 +218,6 @@ struct DemoOptions {
   std::string root = ".", scene = "config/scenes/demo.yaml", assembly, truth, json_path;
 };
 
-Eigen::Isometry3d poseOf(const json& j) {
-  const auto& t = j.at("xyz");
-  const auto& q = j.at("quat");
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.translation() = Eigen::Vector3d(t.at(0), t.at(1), t.at(2));
-  T.linear() = Eigen::Quaterniond(q.at(3).get<double>(), q.at(0).get<double>(), q.at(1).get<double>(), q.at(2).get<double>())
-                   .normalized()
-                   .toRotationMatrix();
-  return T;
-}
-
 /// The demo's assembly against the simulator's truth: every step of assembly_client, the part
 /// cell_sim put down for it, and the error against the target (true base part · T_0i). Exit 3
 /// when a planned part was not executed or has no truth.
@@ -282,7 +265,7 @@ int runDemo(const DemoOptions& o) {
         }
         if (!obj) throw std::runtime_error("the truth names object '" + it->second.at("object").get<std::string>() + "', not in the scene");
         const TriangleMesh mesh = loadMesh(obj->info.mesh_file);
-        const Eigen::Isometry3d placed = poseOf(it->second.at("pose"));
+        const Eigen::Isometry3d placed = cellsight_tools::poseFromJson(it->second.at("pose"));
         const Eigen::Isometry3d target = base->T_base_object * obj->info.T_0i;
         const PoseError e = poseError(obj->info, mesh.surfaceCentroid(), placed, target);
         Eigen::Vector3d off, rot;

@@ -374,6 +374,23 @@ TEST(GraspPlanner, RefusesWithTheReasonAndCarriesOn) {
   EXPECT_NE(plans["flanged_shaft"].reason.find("collides"), std::string::npos) << plans["flanged_shaft"].reason;
   EXPECT_EQ(plans["housing"].status, PlanStatus::kOk) << plans["housing"].reason;
   EXPECT_EQ(plans["holder"].status, PlanStatus::kOk) << plans["holder"].reason;
+  // the assembly goes on past the parts it cannot do, and says which and why
+  size_t idx = 0;
+  const PartPlan first = gp.planNext(home, &idx);
+  ASSERT_EQ(first.status, PlanStatus::kOk);
+  EXPECT_EQ(first.part.model, "housing");
+  EXPECT_TRUE(first.passed_over.empty());
+  gp.commit(idx, first);
+  const PartPlan next = gp.planNext(first.poses.back().q, &idx);
+  ASSERT_EQ(next.status, PlanStatus::kOk) << next.reason;
+  EXPECT_EQ(next.part.model, "holder");
+  ASSERT_EQ(next.passed_over.size(), 2u);
+  EXPECT_EQ(next.passed_over[0].rfind("flanged_shaft: no_path: ", 0), 0u) << next.passed_over[0];
+  EXPECT_EQ(next.passed_over[1].rfind("blade: unreachable: ", 0), 0u) << next.passed_over[1];
+  gp.commit(idx, next);
+  const PartPlan none = gp.planNext(next.poses.back().q, &idx);
+  EXPECT_EQ(none.status, PlanStatus::kNoPath);  // the first refusal, with every part passed over
+  EXPECT_EQ(none.passed_over.size(), 2u);
   // bad inputs
   JointVector nan_q = home;
   nan_q[2] = std::nan("");

@@ -68,7 +68,6 @@ class PlanningEvaluation {
   ~PlanningEvaluation();
   /// One cycle with image noise seed `seed`.
   CycleReport run(uint64_t seed);
-  const ArmModel& arm() const;
 
  private:
   struct Impl;

@@ -73,8 +73,6 @@ class CollisionWorld {
   /// an object the carried part may touch (the one it is inserted into); −1 for none.
   CollisionReport check(const ArmModel& arm, const JointVector& q, double opening, const CarriedPart* carried = nullptr,
                         int ignore_object = -1) const;
-  /// Counts of the narrow-phase checks done (for benchmarks).
-  long long checks() const { return checks_; }
 
   const CollisionWorldConfig& config() const { return config_; }
   /// Another padding around the arm's shapes from now on (0: the bare shapes, for re-checks).
@@ -84,7 +82,6 @@ class CollisionWorld {
   CollisionWorldConfig config_;
   struct Impl;
   std::unique_ptr<Impl> impl_;
-  mutable long long checks_ = 0;
 };
 
 }  // namespace cellsight
