@@ -2,6 +2,7 @@
 #   make demo   install what is missing, build, run the simulated cell cycle headless → out/demo/
 #   make test   install what is missing, build, run every test (ctest); non-zero on any failure
 #   make bench  build and run the benchmarks (figures in docs/)
+#   make train  retrain the shipped learned-descriptor models (config/descriptors/, under 2 h on 2 cores)
 #   make sanitize   clang ASan + UBSan build (_build_san), the core and scanner gtests under it
 #   make fuzz       every libFuzzer target for FUZZ_SECONDS each (default 60) from test/fuzz/corpus
 #   make soak       SOAK_CYCLES (default 1000) cell cycles against one set of nodes → out/soak/
@@ -14,7 +15,7 @@ FUZZ_SECONDS ?= 60
 SOAK_CYCLES ?= 1000
 SOAK_TRAJECTORY ?= quick_sweep
 
-.PHONY: all deps configure build test demo bench sanitize fuzz soak clean format
+.PHONY: all deps configure build test demo bench train sanitize fuzz soak clean format
 
 all: build
 
@@ -36,6 +37,9 @@ test: build
 
 demo:
 	@bash scripts/demo.sh $(BUILD) out/demo
+
+train: build
+	@bash scripts/train.sh $(BUILD) all
 
 bench: build
 	@bash scripts/bench.sh $(BUILD)

@@ -22,5 +22,9 @@ taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_fixtures" --benchmark_r
   --benchmark_out="$CELLSIGHT_BUILD/bench/fixtures.json" --benchmark_out_format=json
 echo "== bench_localization: ours vs PCL, Open3D, OpenCV on the same single-view clouds (one thread each)"
 taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_localization" "$CELLSIGHT_BUILD/bench/localization.json" 8
+echo "== bench_descriptor: the learned descriptor's inference vs FPFH on the same clusters (one core)"
+taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_descriptor" --benchmark_repetitions=3 \
+  --benchmark_report_aggregates_only=true \
+  --benchmark_out="$CELLSIGHT_BUILD/bench/descriptor.json" --benchmark_out_format=json
 echo "== bench_planning: the demo assembly in 20 scenarios, ours vs OMPL RRTConnect / RRT unsimplified and straight joint moves (one core)"
 taskset -c 0 "$CELLSIGHT_BUILD/devel/lib/cellsight/bench_planning" "$CELLSIGHT_BUILD/bench/planning.json" 20

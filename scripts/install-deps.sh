@@ -31,6 +31,8 @@ PACKAGES=(
   liburdfdom-dev libkdl-parser-dev liboctomap-dev libfcl-dev libompl-dev libtrajectory-msgs-dev ros-trajectory-msgs
   python3-trajectory-msgs
   ros-robot-state-publisher
+  # the learned descriptor (libtorch, CPU) and a BLAS for it
+  libtorch-dev libopenblas0-pthread
   # headless rviz screenshots
   xvfb x11-utils imagemagick libgl1-mesa-dri mesa-utils
   # the two-PC test: roslaunch reaches the second "PC" by ssh

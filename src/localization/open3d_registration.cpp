@@ -29,6 +29,12 @@ reg::Feature toFeature(const std::vector<Fpfh>& f) {
   return out;
 }
 
+reg::Feature toFeature(const Eigen::MatrixXf& rows) {
+  reg::Feature out;
+  out.data_ = rows.transpose().cast<double>();
+  return out;
+}
+
 Eigen::Isometry3d toIsometry(const Eigen::Matrix4d& M) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.matrix() = M;
@@ -41,6 +47,21 @@ Eigen::Isometry3d fastGlobalRegistration(const std::vector<Eigen::Vector3f>& mod
                                          const std::vector<Eigen::Vector3f>& scene, const std::vector<Fpfh>& scene_features,
                                          const FgrOptions& o) {
   if (model.size() < 3 || scene.size() < 3) return Eigen::Isometry3d::Identity();
+  open3d::utility::random::Seed(o.seed);
+  reg::FastGlobalRegistrationOption opt(1.4, true, true, o.max_correspondence_distance, o.iterations, o.tuple_scale,
+                                        o.max_tuples, true);
+  const auto r = reg::FastGlobalRegistrationBasedOnFeatureMatching(toOpen3d(model), toOpen3d(scene), toFeature(model_features),
+                                                                   toFeature(scene_features), opt);
+  return toIsometry(r.transformation_);
+}
+
+Eigen::Isometry3d fastGlobalRegistration(const std::vector<Eigen::Vector3f>& model, const Eigen::MatrixXf& model_features,
+                                         const std::vector<Eigen::Vector3f>& scene, const Eigen::MatrixXf& scene_features,
+                                         const FgrOptions& o) {
+  if (model.size() < 3 || scene.size() < 3) return Eigen::Isometry3d::Identity();
+  if (model_features.rows() != static_cast<Eigen::Index>(model.size()) ||
+      scene_features.rows() != static_cast<Eigen::Index>(scene.size()) || model_features.cols() != scene_features.cols())
+    throw std::invalid_argument("fastGlobalRegistration: one feature row per point, the same length on both sides");
   open3d::utility::random::Seed(o.seed);
   reg::FastGlobalRegistrationOption opt(1.4, true, true, o.max_correspondence_distance, o.iterations, o.tuple_scale,
                                         o.max_tuples, true);

@@ -11,6 +11,9 @@
 //              + the sweep options below
 //   cells      random cells (scene generator) scanned in-process, clustered, located: P/R/F1
 //              --seeds N... | --seeds-file config/heldout_seeds.yaml [--out DIR] [--json out.json]
+//   descriptors  FPFH vs the learned descriptor in the same RANSAC pipeline: held-out laser views of
+//              our parts and the real UWA / PCL scenes [--views 12] [--json F] [--png F]
+//              [--limit-beats-fpfh MARGIN] (exit 4 unless learned beats FPFH)
 //   (a part in a real scan from files: cellsight_locate)
 //   sweep options (occlusion, outliers): [--search all|self] [--root repo] [--scene S.yaml]
 //              [--models folder] [--matching matching.yaml] [--max-t-mm 2] [--max-r-deg 2]
@@ -51,6 +54,7 @@
 #include "cellsight/sim/scene.hpp"
 #include "cli_args.hpp"
 #include "gnuplot.hpp"
+#include "descriptor_eval.hpp"
 #include "json_pose.hpp"
 
 using namespace cellsight;
@@ -632,7 +636,30 @@ int main(int argc, char** argv) {
       ->check(positive());
   c_cells->add_option("--limit-recall", cells.limit_recall, "exit 4 if the recall is below this")->check(fraction());
 
+  cellsight_tools::DescriptorEvalOptions desc;
+  CLI::App* c_desc = app.add_subcommand("descriptors", "FPFH against the learned descriptor in the same RANSAC pipeline: "
+                                                       "held-out laser views of our parts, real UWA / PCL scenes");
+  c_desc->add_option("--root", desc.root, "the package folder (config/)")->capture_default_str();
+  c_desc->add_option("--data", desc.data, "real point-cloud data [default: <root>/../shared/data/pointclouds]");
+  c_desc->add_option("--parts", desc.parts, "parts, comma-separated")->delimiter(',')->capture_default_str();
+  c_desc->add_option("--views", desc.views, "held-out views per part")->check(cellsight_tools::positiveInt())->capture_default_str();
+  c_desc->add_option("--learned", desc.learned, "model trained with local reference frames")->capture_default_str();
+  c_desc->add_option("--augment", desc.augment, "model trained by rotation augmentation")->capture_default_str();
+  c_desc->add_option("--rotations", desc.rotations, "turns of the multi-rotation method")
+      ->check(cellsight_tools::positiveInt())->capture_default_str();
+  c_desc->add_option("--max-iterations", desc.max_iterations, "RANSAC hypotheses at most (every method)")
+      ->check(cellsight_tools::positiveInt())->capture_default_str();
+  bool no_real = false;
+  c_desc->add_flag("--no-real", no_real, "leave out the real scenes");
+  c_desc->add_option("--json", desc.json, "write the figures to this JSON file");
+  c_desc->add_option("--png", desc.png, "write the success plot to this PNG");
+  c_desc->add_option("--limit-beats-fpfh", desc.limit_recall_margin,
+                     "exit 4 unless the learned (LRF) descriptor's recall exceeds FPFH's by this and its registration "
+                     "success is higher")
+      ->check(cellsight_tools::nonNegative());
+
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;
+  desc.real = !no_real;
   if (!seeds_file.empty()) {
     YamlMap m(loadYamlFile(seeds_file), seeds_file);
     for (const auto& s : m.raw("seeds")) cell_seeds.push_back(s.as<uint64_t>());
@@ -645,6 +672,7 @@ int main(int argc, char** argv) {
     if (c_cld->parsed()) return runCloud(cld);
     if (c_occ->parsed()) return runOcclusion(occ);
     if (c_out->parsed()) return runOutliers(outl);
+    if (c_desc->parsed()) return cellsight_tools::runDescriptorEvaluation(desc);
     if (c_cells->parsed()) {
       if (cell_seeds.empty()) throw std::invalid_argument("cells: give --seeds or --seeds-file");
       return runCells(cells, cell_seeds, cells_out);

@@ -21,6 +21,11 @@ Eigen::Isometry3d fastGlobalRegistration(const std::vector<Eigen::Vector3f>& mod
                                          const std::vector<Eigen::Vector3f>& scene, const std::vector<Fpfh>& scene_features,
                                          const FgrOptions& options);
 
+/// The same with any per-point features (rows: points; the learned descriptor).
+Eigen::Isometry3d fastGlobalRegistration(const std::vector<Eigen::Vector3f>& model, const Eigen::MatrixXf& model_features,
+                                         const std::vector<Eigen::Vector3f>& scene, const Eigen::MatrixXf& scene_features,
+                                         const FgrOptions& options);
+
 struct Open3dRansacOptions {
   double max_correspondence_distance = 0.003;
   bool mutual_filter = true;

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "cellsight/localization/learned_descriptor.hpp"
 #include "cellsight/localization/model_library.hpp"
 #include "cellsight/common/scan_cloud.hpp"
 
@@ -32,6 +33,20 @@ struct MatchingConfig {
   /// Coarse alignment: "ppf" (point pair feature voting, default), "ransac" (FPFH
   /// correspondences + RANSAC, the thesis's method) or "fgr" (FPFH + fast global registration).
   std::string coarse = "ppf";
+  /// The per-point descriptor of the ransac and fgr paths: "fpfh" (PCL, feature_radius) or
+  /// "learned" (the PointNet++ of learned_descriptor.hpp from learned_model, on the same coarse
+  /// points and normals; docs/learned_descriptors.md).
+  std::string descriptor = "fpfh";
+  /// Model file of the learned descriptor; a relative path is taken from the folder of the
+  /// settings file that names it (loadMatchingConfig resolves it).
+  std::string learned_model = "descriptors/learned_k16.pt";
+  int learned_dims = 16;         ///< K the file must have
+  /// the model's descriptors at this many turns (the first: none), RANSAC / FGR on each, the
+  /// best kept (the thesis's multi-rotation, for models trained by augmentation; 1: off)
+  int learned_rotations = 1;
+  double learned_scale = 1.0;    ///< coordinates × this before the network (parts far from 5-12 cm)
+  /// a model file that cannot be used: FPFH with a warning (false: the matcher refuses to start)
+  bool learned_fallback = true;
   double ppf_sampling = 0.0035;      ///< m, points of model and scene paired
   double ppf_distance_step = 0.003;  ///< m, pair distance quantisation
   int ppf_angle_bins = 30;           ///< angle quantisation (12°) and rotation bins
@@ -132,6 +147,8 @@ struct MatchStats {
   /// CPU seconds per stage, summed over clusters and (cluster, model) pairs (threads overlap):
   /// scene preparation (voxels, normals), coarse (PPF/RANSAC/FGR), refinement (ICP, validation)
   double scene_seconds = 0, coarse_seconds = 0, refine_seconds = 0;
+  /// of which the learned descriptor (scene clusters; the models' at preparation are not counted)
+  double descriptor_seconds = 0;
   size_t pairs = 0, pairs_skipped_by_size = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
@@ -211,11 +228,15 @@ class ModelMatcher {
   std::string cacheFile(const ModelEntry& e, const std::string& id) const;
   bool loadIndex(const std::string& file, const ModelEntry& e, ModelIndex& m) const;
   void saveIndex(const std::string& file, const ModelIndex& m) const;
+  /// descriptor: learned — the model's descriptors at each of learned_rotations turns
+  void addLearned(ModelIndex& m) const;
 
   std::shared_ptr<const ModelLibrary> library_;
   MatchingConfig config_;
   mutable std::mutex mutex_;
   mutable std::map<std::string, std::shared_ptr<const ModelIndex>> indices_;
+  std::shared_ptr<const LearnedDescriptor> learned_;  ///< descriptor: learned
+  std::string fallback_warning_;  ///< why descriptor: learned runs on FPFH
 };
 
 /// Strict loader of config/matching.yaml (ConfigError names file and key).

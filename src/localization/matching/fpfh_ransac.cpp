@@ -1,5 +1,5 @@
-// Coarse stage "ransac" (the thesis's method): FPFH descriptor correspondences and RANSAC on
-// 3-point hypotheses with cheap pre-rejection.
+// Coarse stage "ransac" (the thesis's method): FPFH (or learned) descriptor correspondences and
+// RANSAC on 3-point hypotheses with cheap pre-rejection.
 #include <numeric>
 #include <random>
 
@@ -25,6 +25,15 @@ std::vector<Correspondence> correspondences(const SceneData& s, const ModelMatch
   }
   if (cfg.mutual_filter && static_cast<int>(mutual.size()) >= cfg.min_correspondences) return mutual;
   return one_way;
+}
+
+std::vector<Correspondence> learnedCorrespondences(const SceneData& s, const ModelMatcher::ModelIndex& m, size_t turn,
+                                                   const MatchingConfig& cfg) {
+  std::vector<Correspondence> out;
+  if (turn >= m.learned.size() || s.learned.rows() == 0) return out;
+  for (const auto& [si, mi] : matchDescriptors(s.learned, m.learned[turn], cfg.mutual_filter, cfg.min_correspondences))
+    out.push_back({si, mi});
+  return out;
 }
 
 namespace {

@@ -25,6 +25,36 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   const auto t_coarse = Clock::now();
   if (cfg.coarse == "ppf") {
     candidates = ppfHypotheses(s, m, cfg, support, &d.iterations);
+  } else if (cfg.descriptor == "learned") {
+    // every turn of the model's descriptors gives its own correspondences and hypotheses; the
+    // refinement below scores them all (T = T_found · T_turn: the model points are not turned)
+    for (size_t turn = 0; turn < m.learned.size(); ++turn) {
+      if (cfg.coarse == "fgr") {
+        // FGR matches the features itself
+        const auto& sf = s.learned;
+        const auto& mf = m.learned[turn];
+        const auto& sp = s.coarse.points;
+        const auto& mp = m.coarse->points;
+        FgrOptions o;
+        o.max_correspondence_distance = cfg.inlier_distance;
+        o.seed = static_cast<int>((seed + turn) % 1000003);
+        Hypothesis h;
+        try {
+          h.T = fastGlobalRegistration(mp, mf, sp, sf, o).cast<float>();
+          candidates.push_back(h);
+        } catch (const std::exception&) {
+        }
+        d.iterations += o.iterations;
+      } else {
+        int it = 0;
+        for (auto& h : ransac(s, m, learnedCorrespondences(s, m, turn, cfg), cfg, seed + 31 * turn, &it))
+          candidates.push_back(h);
+        d.iterations += it;
+      }
+    }
+    std::sort(candidates.begin(), candidates.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
+    if (cfg.coarse == "ransac" && candidates.size() > static_cast<size_t>(std::max(1, cfg.refine_candidates)))
+      candidates.resize(std::max(1, cfg.refine_candidates));
   } else if (cfg.coarse == "fgr") {
     std::vector<Vec3> sp, mp;
     std::vector<Fpfh> sf, mf;
@@ -115,9 +145,32 @@ ModelMatcher::ModelMatcher(std::shared_ptr<const ModelLibrary> library, const Ma
     throw std::invalid_argument("ModelMatcher: scene_search must be 'grid' or 'kdtree' (got '" + config_.scene_search + "')");
   }
   if (config_.threads <= 0) config_.threads = std::max(1u, std::thread::hardware_concurrency());
+  if (config_.descriptor == "learned" && config_.coarse != "ppf") {
+    try {
+      learned_ = std::make_shared<const LearnedDescriptor>(LearnedDescriptor::load(config_.learned_model, config_.learned_dims));
+      LearnedDescriptor::setThreads(1);  // the matcher runs its pairs in parallel itself
+    } catch (const DescriptorModelError& e) {
+      if (!config_.learned_fallback) throw;
+      fallback_warning_ = std::string(e.what()) + "; descriptor: fpfh is used instead (learned_fallback)";
+      config_.descriptor = "fpfh";
+    }
+  }
 }
 
 ModelMatcher::~ModelMatcher() = default;
+
+void ModelMatcher::addLearned(ModelIndex& m) const {
+  if (!learned_) return;
+  m.learned.clear();
+  for (const Eigen::Matrix3f& R : descriptorTurns(config_.learned_rotations)) {
+    std::vector<Vec3> p(m.coarse->size()), n(m.coarse->size());
+    for (size_t i = 0; i < p.size(); ++i) {
+      p[i] = R * m.coarse->points[i];
+      n[i] = R * m.coarse->normals[i];
+    }
+    m.learned.push_back(learned_->compute(p, n, config_.learned_scale));
+  }
+}
 
 std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::string& id) const {
   {
@@ -141,6 +194,7 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
     if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
     m->caster.commit();
     if (m->has_mesh) m->patches = facePatches(e.mesh, m->faces, patchMinArea(config_));
+    addLearned(*m);
     std::lock_guard<std::mutex> lock(mutex_);
     return indices_.emplace(id, m).first->second;
   }
@@ -169,6 +223,8 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
     m->ppf_cloud = thinned(*m->coarse, config_.ppf_sampling);
     m->ppf = buildPpf(m->ppf_cloud, static_cast<float>(config_.ppf_distance_step), config_.ppf_angle_bins,
                       static_cast<size_t>(config_.ppf_max_bucket));
+  } else if (config_.descriptor == "learned") {
+    addLearned(*m);
   } else {
     m->fpfh = computeFpfh(*m->coarse, config_.feature_radius);
     std::vector<Fpfh> valid;
@@ -266,6 +322,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
   st = MatchStats();
+  if (!fallback_warning_.empty()) st.warnings.push_back(fallback_warning_);
   std::vector<std::string> models = models_in.empty() ? library_->ids() : models_in;
   for (const auto& id : models) library_->model(id);  // unknown id: throws before any work
   std::vector<std::shared_ptr<const ModelIndex>> idx(models.size());
@@ -275,7 +332,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     int cluster;
     std::vector<Vec3> points;
     std::unique_ptr<SceneData> scene;
-    double scene_seconds = 0;
+    double scene_seconds = 0, descriptor_seconds = 0;
     double min_coverage = 1e9;  // asked of a detection here: the config's, less on a second look
     std::vector<PartDetection> per_model;
   };
@@ -310,9 +367,18 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       const auto t = Clock::now();
       round[i].scene = prepareScene(round[i].points, cfg);
       round[i].scene->support_seen = &seen;
+      if (learned_ && cfg.descriptor == "learned" && round[i].scene->coarse.size() >= 3) {
+        const auto td = Clock::now();
+        SceneData& sd = *round[i].scene;
+        sd.learned = learned_->compute(sd.coarse.points, sd.coarse.normals, cfg.learned_scale);
+        round[i].descriptor_seconds = seconds(td);
+      }
       round[i].scene_seconds = seconds(t);
     });
-    for (const auto& w : round) st.scene_seconds += w.scene_seconds;
+    for (const auto& w : round) {
+      st.scene_seconds += w.scene_seconds;
+      st.descriptor_seconds += w.descriptor_seconds;
+    }
     std::vector<std::pair<size_t, size_t>> pairs;
     // a cluster larger than every model holds several parts (touching ones that clustering
     // could not split): every model is tried on it and coverage is not asked of the first

@@ -62,6 +62,20 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.min_correspondences = m.getInt("min_correspondences", c.min_correspondences);
   c.coarse = m.getString("coarse", c.coarse);
   if (c.coarse != "ppf" && c.coarse != "ransac" && c.coarse != "fgr") m.fail("coarse", "must be ppf, ransac or fgr");
+  c.descriptor = m.getString("descriptor", c.descriptor);
+  if (c.descriptor != "fpfh" && c.descriptor != "learned") m.fail("descriptor", "must be fpfh or learned");
+  if (c.descriptor == "learned" && c.coarse == "ppf") m.fail("descriptor", "learned needs coarse: ransac or fgr (ppf uses no descriptor)");
+  c.learned_model = m.getString("learned_model", c.learned_model);
+  if (c.learned_model.empty()) m.fail("learned_model", "must name a model file");
+  if (c.learned_model[0] != '/') {
+    const auto slash = path.find_last_of('/');
+    c.learned_model = (slash == std::string::npos ? std::string(".") : path.substr(0, slash)) + "/" + c.learned_model;
+  }
+  c.learned_dims = m.getInt("learned_dims", c.learned_dims);
+  if (c.learned_dims != 16 && c.learned_dims != 32) m.fail("learned_dims", "must be 16 or 32");
+  atLeast("learned_rotations", c.learned_rotations, 1);
+  positive("learned_scale", c.learned_scale);
+  c.learned_fallback = m.getBool("learned_fallback", c.learned_fallback);
   positive("ppf_sampling", c.ppf_sampling);
   positive("ppf_distance_step", c.ppf_distance_step);
   c.ppf_angle_bins = m.getInt("ppf_angle_bins", c.ppf_angle_bins);

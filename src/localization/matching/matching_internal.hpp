@@ -134,6 +134,7 @@ struct ModelMatcher::ModelIndex {
   std::vector<Fpfh> fpfh;                   // of coarse (invalid ones zeroed)
   pcl::KdTreeFLANN<pcl::FPFHSignature33> fpfh_tree;
   std::vector<int> fpfh_valid;              // coarse indices with a valid descriptor
+  std::vector<Eigen::MatrixXf> learned;     // descriptor: learned, per turn of learned_rotations (rows: coarse)
   std::shared_ptr<const ScanCloud> fine;    // at config.icp_spacing
   pcl::KdTreeFLANN<pcl::PointXYZ> fine_tree;
   matching_detail::DistanceField field;
@@ -184,6 +185,7 @@ struct SceneData {
   std::vector<Fpfh> fpfh;
   std::vector<int> fpfh_valid;
   pcl::KdTreeFLANN<pcl::FPFHSignature33> fpfh_tree;
+  Eigen::MatrixXf learned;     // descriptor: learned, a row per coarse point
   ScanCloud ppf;               // coarse thinned to ppf_sampling
   std::vector<Vec3> icp_points;
   PointGrid grid;                        // over `all` (scene_search: grid)
@@ -249,6 +251,9 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
 
 // ---- fpfh_ransac.cpp
 /// FPFH matches scene → model (mutual when at least min_correspondences survive the filter).
+/// descriptor: learned — mutual nearest neighbours against the model's descriptors at turn `turn`
+std::vector<Correspondence> learnedCorrespondences(const SceneData& s, const ModelMatcher::ModelIndex& m, size_t turn,
+                                                   const MatchingConfig& cfg);
 std::vector<Correspondence> correspondences(const SceneData& s, const ModelMatcher::ModelIndex& m,
                                             const MatchingConfig& cfg);
 /// RANSAC over 3-point hypotheses: the best refine_candidates distinct poses.

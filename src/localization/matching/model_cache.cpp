@@ -56,7 +56,8 @@ std::string ModelMatcher::cacheFile(const ModelEntry& e, const std::string& id) 
   settings.precision(17);
   settings << c.voxel << ' ' << c.normal_radius << ' ' << c.feature_radius << ' ' << c.coarse << ' ' << c.ppf_sampling
            << ' ' << c.ppf_distance_step << ' ' << c.ppf_angle_bins << ' ' << c.ppf_max_bucket << ' ' << c.icp_spacing
-           << ' ' << c.inlier_distance << ' ' << c.icp_mesh_polish << ' ' << c.closest_point_grid << ' ' << c.fitness_radius;
+           << ' ' << c.inlier_distance << ' ' << c.icp_mesh_polish << ' ' << c.closest_point_grid << ' ' << c.fitness_radius
+           << ' ' << c.descriptor;  // learned: no FPFH stored (its descriptors are computed at load)
   const std::string s = settings.str();
   h = fnv1a64(s.data(), s.size(), h);
   char name[32];

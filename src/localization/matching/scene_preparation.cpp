@@ -156,7 +156,7 @@ std::unique_ptr<SceneData> prepareScene(const std::vector<Vec3>& finite, const M
   const Vec3 b = farthest(s->coarse.points[0]), c = farthest(b);
   s->diameter = (b - c).norm();
   s->plane = scenePlane(s->coarse, cfg);
-  if (cfg.coarse == "ppf") return s;
+  if (cfg.coarse == "ppf" || cfg.descriptor == "learned") return s;  // the learned one: the matcher's
   pcl::FPFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::FPFHSignature33> fe;
   fe.setInputCloud(kept);
   fe.setInputNormals(kept_n);

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Reproduces the shipped learned-descriptor models (config/descriptors/): the trainer with the
+# settings they were made with, on this machine's CPUs. Usage: scripts/train.sh <build> [lrf|augment|all]
+# Parts held out of training (the evaluation's unseen parts): blade and holder.
+set -euo pipefail
+BUILD=${1:-_build}
+WHICH=${2:-all}
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+TRAIN="$BUILD/devel/lib/cellsight/cellsight_train_descriptor"
+MESHES=(--mesh "$ROOT/config/models/housing/mesh.ply" --mesh "$ROOT/config/models/flanged_shaft/mesh.ply"
+        --mesh "$ROOT/config/models/bracket/mesh.ply")
+COMMON=(--generated 200 --dims 16 --levels 2 --threads 1 --seed 7 --validate-every 500 --model-pair-share 0.6 --time-limit 7000)
+if [ "$WHICH" = lrf ] || [ "$WHICH" = all ]; then
+  echo "== learned descriptor, local reference frames (config/descriptors/learned_k16.pt)"
+  "$TRAIN" "${MESHES[@]}" "${COMMON[@]}" --rotation lrf --steps 12000 --output "$ROOT/config/descriptors/learned_k16.pt" \
+    --checkpoint "$BUILD/train_lrf.ckpt" --resume
+fi
+if [ "$WHICH" = augment ] || [ "$WHICH" = all ]; then
+  echo "== learned descriptor, rotation augmentation (config/descriptors/learned_k16_augment.pt)"
+  "$TRAIN" "${MESHES[@]}" "${COMMON[@]}" --rotation augment --steps 6000 \
+    --output "$ROOT/config/descriptors/learned_k16_augment.pt" --checkpoint "$BUILD/train_augment.ckpt" --resume
+fi

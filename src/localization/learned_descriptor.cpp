@@ -1,0 +1,526 @@
+// The learned descriptor's network (PointNet++ segmentation variant, multi-scale grouping) and
+// its inference, load and save. One of the two translation units that include libtorch.
+#include <dlfcn.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <numeric>
+#include <random>
+
+#include <Eigen/Geometry>
+#include <sstream>
+
+#include "cellsight/common/file_io.hpp"
+#include "cellsight/common/point_grid.hpp"
+#include "learned_descriptor_impl.hpp"
+
+namespace cellsight {
+namespace descriptor_detail {
+namespace {
+
+using Vec3 = Eigen::Vector3f;
+
+/// Farthest-point sampling of m of the points (the first: the one farthest from the mean).
+std::vector<int> farthestPoints(const std::vector<Vec3>& p, int m) {
+  const int n = static_cast<int>(p.size());
+  std::vector<int> out;
+  if (m >= n) {
+    out.resize(n);
+    std::iota(out.begin(), out.end(), 0);
+    return out;
+  }
+  Vec3 mean = Vec3::Zero();
+  for (const auto& q : p) mean += q;
+  mean /= static_cast<float>(n);
+  int first = 0;
+  float far = -1;
+  for (int i = 0; i < n; ++i) {
+    const float d = (p[i] - mean).squaredNorm();
+    if (d > far) far = d, first = i;
+  }
+  std::vector<float> dist(n, std::numeric_limits<float>::max());
+  out.reserve(m);
+  int cur = first;
+  for (int k = 0; k < m; ++k) {
+    out.push_back(cur);
+    int next = 0;
+    float best = -1;
+    const Vec3 c = p[cur];
+    for (int i = 0; i < n; ++i) {
+      const float d = (p[i] - c).squaredNorm();
+      if (d < dist[i]) dist[i] = d;
+      if (dist[i] > best) best = dist[i], next = i;
+    }
+    cur = next;
+  }
+  return out;
+}
+
+/// Frame of a group: columns x, y, z. z along the smallest spread (signed by the centre's
+/// normal), x along the largest (signed towards the side holding more of the group).
+Eigen::Matrix3f groupFrame(const std::vector<Vec3>& p, const std::vector<int>& members, const Vec3& c, const Vec3& normal,
+                           float r) {
+  Eigen::Matrix3f cov = Eigen::Matrix3f::Zero();
+  float wsum = 0;
+  for (int j : members) {
+    const Vec3 d = p[j] - c;
+    const float w = std::max(0.f, r - d.norm());
+    cov += w * d * d.transpose();
+    wsum += w;
+  }
+  Eigen::Matrix3f R = Eigen::Matrix3f::Identity();
+  if (wsum <= 0) return R;
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov / wsum);
+  Vec3 z = es.eigenvectors().col(0), x = es.eigenvectors().col(2);
+  if (normal.allFinite() && z.dot(normal) < 0) z = -z;
+  float side = 0;
+  for (int j : members) {
+    const Vec3 d = p[j] - c;
+    const float w = std::max(0.f, r - d.norm());
+    side += w * d.dot(x);
+  }
+  if (side < 0) x = -x;
+  R.col(0) = x;
+  R.col(2) = z;
+  R.col(1) = z.cross(x);
+  return R;
+}
+
+/// The rotation-invariant part of a group member's input (the point pair feature of FPFH and
+/// PPF): its distance, the offset along the centre's normal, the normals' agreement, the
+/// member's normal along the offset.
+void appendInvariant(const Vec3& d, const Vec3& nc, const Vec3& nj, std::vector<float>& x) {
+  const float len = d.norm();
+  const Vec3 u = len > 1e-6f ? Vec3(d / len) : Vec3::Zero();
+  x.insert(x.end(), {len, nc.dot(d), nc.dot(nj), nj.dot(u)});
+}
+
+/// Up to k of the points in the list, spread evenly over it; fewer are repeated cyclically.
+void pick(const std::vector<int>& found, int k, std::vector<int64_t>& out) {
+  const size_t f = found.size();
+  for (int i = 0; i < k; ++i) {
+    if (f >= static_cast<size_t>(k)) out.push_back(found[static_cast<size_t>(i) * f / k]);
+    else out.push_back(found[i % f]);
+  }
+}
+
+torch::Tensor toTensor(const std::vector<float>& v, std::vector<int64_t> shape) {
+  return torch::from_blob(const_cast<float*>(v.data()), shape, torch::kFloat32).clone();
+}
+torch::Tensor toTensor(const std::vector<int64_t>& v) {
+  return torch::from_blob(const_cast<int64_t*>(v.data()), {static_cast<int64_t>(v.size())}, torch::kInt64).clone();
+}
+
+}  // namespace
+
+Structure buildStructure(const std::vector<Vec3>& p0, const std::vector<Vec3>& n0, const DescriptorNetConfig& c) {
+  const bool lrf = c.rotation == "lrf";
+  Structure s;
+  s.n = static_cast<int64_t>(p0.size());
+  // per-point encoder: every point's neighbourhood
+  {
+    const float r = static_cast<float>(c.point_radius);
+    const int k = c.point_samples;
+    PointGrid grid(p0, r);
+    std::vector<float> x;
+    x.reserve(p0.size() * k * 6);
+    std::vector<int> found;
+    std::vector<int64_t> chosen;
+    for (size_t i = 0; i < p0.size(); ++i) {
+      found.clear();
+      grid.forEachWithin(p0[i], r, [&](size_t j, float) { found.push_back(static_cast<int>(j)); });
+      if (found.empty()) found.push_back(static_cast<int>(i));
+      const Eigen::Matrix3f R = lrf ? groupFrame(p0, found, p0[i], n0[i], r) : Eigen::Matrix3f::Identity();
+      chosen.clear();
+      pick(found, k, chosen);
+      for (int64_t j : chosen) {
+        const Vec3 d = R.transpose() * (p0[j] - p0[i]);
+        const Vec3 nn = R.transpose() * n0[j];
+        x.insert(x.end(), {d.x(), d.y(), d.z(), nn.x(), nn.y(), nn.z()});
+        appendInvariant(p0[j] - p0[i], n0[i], n0[j], x);
+      }
+    }
+    s.x0 = toTensor(x, {s.n, k, kPointInputs});
+  }
+  std::vector<Vec3> prev = p0, prev_n = n0;
+  for (size_t l = 0; l < c.centres.size(); ++l) {
+    Structure::Level L;
+    const std::vector<int> centre = farthestPoints(prev, c.centres[l]);
+    L.m = static_cast<int64_t>(centre.size());
+    const float rs = static_cast<float>(c.radius_small[l]), rl = static_cast<float>(c.radius_large[l]);
+    const int ks = c.samples_small[l], kl = c.samples_large[l];
+    PointGrid grid(prev, rl);
+    std::vector<int64_t> is, il;
+    std::vector<float> xs, xl;
+    std::vector<int> found_s, found_l;
+    for (int ci : centre) {
+      found_s.clear();
+      found_l.clear();
+      const float rs2 = rs * rs;
+      grid.forEachWithin(prev[ci], rl, [&](size_t j, float d2) {
+        found_l.push_back(static_cast<int>(j));
+        if (d2 <= rs2) found_s.push_back(static_cast<int>(j));
+      });
+      if (found_l.empty()) found_l.push_back(ci);
+      if (found_s.empty()) found_s.push_back(ci);
+      const Eigen::Matrix3f R = lrf ? groupFrame(prev, found_l, prev[ci], prev_n[ci], rl) : Eigen::Matrix3f::Identity();
+      const size_t s0 = is.size(), l0 = il.size();
+      pick(found_s, ks, is);
+      pick(found_l, kl, il);
+      for (size_t q = s0; q < is.size(); ++q) {
+        const Vec3 d = R.transpose() * (prev[is[q]] - prev[ci]);
+        xs.insert(xs.end(), {d.x(), d.y(), d.z()});
+        appendInvariant(prev[is[q]] - prev[ci], prev_n[ci], prev_n[is[q]], xs);
+      }
+      for (size_t q = l0; q < il.size(); ++q) {
+        const Vec3 d = R.transpose() * (prev[il[q]] - prev[ci]);
+        xl.insert(xl.end(), {d.x(), d.y(), d.z()});
+        appendInvariant(prev[il[q]] - prev[ci], prev_n[ci], prev_n[il[q]], xl);
+      }
+    }
+    L.idx_small = toTensor(is);
+    L.idx_large = toTensor(il);
+    L.rel_small = toTensor(xs, {L.m, ks, kGroupInputs});
+    L.rel_large = toTensor(xl, {L.m, kl, kGroupInputs});
+    // feature propagation: each previous point's three nearest centres, inverse-distance weights
+    std::vector<int64_t> up;
+    std::vector<float> w;
+    up.reserve(prev.size() * 3);
+    w.reserve(prev.size() * 3);
+    for (const auto& q : prev) {
+      int b[3] = {0, 0, 0};
+      float d[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
+                    std::numeric_limits<float>::max()};
+      for (size_t k = 0; k < centre.size(); ++k) {
+        const float dd = (prev[centre[k]] - q).squaredNorm();
+        if (dd >= d[2]) continue;
+        int at = 2;
+        while (at > 0 && dd < d[at - 1]) {
+          d[at] = d[at - 1];
+          b[at] = b[at - 1];
+          --at;
+        }
+        d[at] = dd;
+        b[at] = static_cast<int>(k);
+      }
+      float ws[3], sum = 0;
+      for (int a = 0; a < 3; ++a) {
+        if (d[a] == std::numeric_limits<float>::max()) {  // fewer than 3 centres
+          ws[a] = 0;
+          b[a] = b[0];
+        } else {
+          ws[a] = 1.f / (std::sqrt(d[a]) + 1e-4f);
+        }
+        sum += ws[a];
+      }
+      for (int a = 0; a < 3; ++a) {
+        up.push_back(b[a]);
+        w.push_back(ws[a] / sum);
+      }
+    }
+    L.up_idx = toTensor(up);
+    L.up_w = toTensor(w, {static_cast<int64_t>(prev.size()), 3, 1});
+    std::vector<Vec3> next, next_n;
+    for (int ci : centre) {
+      next.push_back(prev[ci]);
+      next_n.push_back(prev_n[ci]);
+    }
+    prev = std::move(next);
+    prev_n = std::move(next_n);
+    s.levels.push_back(std::move(L));
+  }
+  return s;
+}
+
+MlpImpl::MlpImpl(int64_t in, const std::vector<int64_t>& out) {
+  for (size_t i = 0; i < out.size(); ++i) {
+    layers.push_back(register_module("fc" + std::to_string(i), torch::nn::Linear(in, out[i])));
+    in = out[i];
+  }
+}
+
+torch::Tensor MlpImpl::forward(torch::Tensor x) {
+  for (auto& l : layers) x = torch::relu(l->forward(x));
+  return x;
+}
+
+NetImpl::NetImpl(const DescriptorNetConfig& c) : config(c) {
+  const int64_t w = c.width;
+  point = register_module("point", Mlp(kPointInputs, std::vector<int64_t>{w, w}));
+  // channels per level of each scale: w, 2w, 4w, 4w (concatenated: twice that)
+  std::vector<int64_t> ch{w};  // level 0: the per-point encoder
+  for (size_t l = 0; l < c.centres.size(); ++l) {
+    const int64_t o = w << std::min<size_t>(l, 2);
+    small.push_back(register_module("sa" + std::to_string(l + 1) + "_small", Mlp(kGroupInputs + ch.back(), std::vector<int64_t>{o, o})));
+    large.push_back(register_module("sa" + std::to_string(l + 1) + "_large", Mlp(kGroupInputs + ch.back(), std::vector<int64_t>{o, o})));
+    ch.push_back(2 * o);
+  }
+  // propagation from the top: level l+1's (propagated) features onto level l, with its own
+  int64_t carried = ch.back();
+  up.assign(c.centres.size(), Mlp(nullptr));
+  for (int l = static_cast<int>(c.centres.size()) - 1; l >= 0; --l) {
+    const int64_t o = l == 0 ? 2 * w : std::min<int64_t>(ch[l], 4 * w);
+    up[l] = register_module("fp" + std::to_string(l), Mlp(carried + ch[l], std::vector<int64_t>{o, o}));
+    carried = o;
+  }
+  head = register_module("head", torch::nn::Linear(carried, c.dims));
+}
+
+torch::Tensor NetImpl::forward(const Structure& s) {
+  std::vector<torch::Tensor> f;
+  f.push_back(std::get<0>(point->forward(s.x0).max(1)));  // [n, w]
+  for (size_t l = 0; l < s.levels.size(); ++l) {
+    const auto& L = s.levels[l];
+    auto group = [&](const torch::Tensor& idx, const torch::Tensor& rel, Mlp& mlp) {
+      const auto g = f.back().index_select(0, idx).view({L.m, rel.size(1), -1});
+      return std::get<0>(mlp->forward(torch::cat({rel, g}, 2)).max(1));
+    };
+    f.push_back(torch::cat({group(L.idx_small, L.rel_small, small[l]), group(L.idx_large, L.rel_large, large[l])}, 1));
+  }
+  torch::Tensor g = f.back();
+  for (int l = static_cast<int>(s.levels.size()) - 1; l >= 0; --l) {
+    const auto& L = s.levels[l];
+    const int64_t p = f[l].size(0);
+    const auto interp = (g.index_select(0, L.up_idx).view({p, 3, -1}) * L.up_w).sum(1);
+    g = up[l]->forward(torch::cat({interp, f[l]}, 1));
+  }
+  return torch::nn::functional::normalize(head->forward(g), torch::nn::functional::NormalizeFuncOptions().dim(1));
+}
+
+}  // namespace descriptor_detail
+
+void checkDescriptorNetConfig(const DescriptorNetConfig& c) {
+  auto bad = [](const std::string& what) { throw DescriptorModelError("learned descriptor: " + what); };
+  if (c.dims < 1 || c.dims > 1024) bad("dims must be in [1, 1024], got " + std::to_string(c.dims));
+  if (c.rotation != "lrf" && c.rotation != "augment") bad("rotation must be lrf or augment, got '" + c.rotation + "'");
+  if (!(c.unit > 0) || !std::isfinite(c.unit)) bad("unit must be a positive length in metres");
+  if (c.width < 1 || c.width > 1024) bad("width must be in [1, 1024]");
+  const size_t L = c.centres.size();
+  if (L == 0 || c.radius_small.size() != L || c.radius_large.size() != L || c.samples_small.size() != L ||
+      c.samples_large.size() != L)
+    bad("centres, radius_small, radius_large, samples_small and samples_large need one entry per level");
+  for (size_t l = 0; l < L; ++l) {
+    if (c.centres[l] < 1 || c.samples_small[l] < 1 || c.samples_large[l] < 1) bad("centre and sample counts must be ≥ 1");
+    if (!(c.radius_small[l] > 0) || !(c.radius_large[l] >= c.radius_small[l])) bad("radii must be > 0, large ≥ small");
+  }
+  if (!(c.point_radius > 0) || c.point_samples < 1) bad("point_radius must be > 0 and point_samples ≥ 1");
+}
+
+LearnedDescriptor::LearnedDescriptor(const DescriptorNetConfig& config, uint64_t seed) {
+  checkDescriptorNetConfig(config);
+  static const bool blas_single = [] {
+    using SetThreads = void (*)(int);
+    if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) f(1);
+    return true;
+  }();
+  (void)blas_single;
+  torch::manual_seed(seed);
+  impl_ = std::make_unique<Impl>(config);
+}
+
+LearnedDescriptor::~LearnedDescriptor() = default;
+LearnedDescriptor::LearnedDescriptor(LearnedDescriptor&&) noexcept = default;
+LearnedDescriptor& LearnedDescriptor::operator=(LearnedDescriptor&&) noexcept = default;
+
+const DescriptorNetConfig& LearnedDescriptor::config() const { return impl_->net->config; }
+
+size_t LearnedDescriptor::parameterCount() const {
+  size_t n = 0;
+  for (const auto& p : impl_->net->parameters()) n += static_cast<size_t>(p.numel());
+  return n;
+}
+
+void LearnedDescriptor::setThreads(int threads) {
+  torch::set_num_threads(std::max(1, threads));
+  // OpenBLAS (Debian's libblas.so.3 alternative) runs a thread pool of its own under libtorch's
+  // matrix products; on these small products it only spins (training took 2x the time). One
+  // thread; looked up at run time so that any BLAS works.
+  using SetThreads = void (*)(int);
+  if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) f(1);
+}
+
+namespace {
+std::vector<int64_t> toInt64(const std::vector<int>& v) { return {v.begin(), v.end()}; }
+std::vector<int> toInt(const std::vector<int64_t>& v) { return {v.begin(), v.end()}; }
+}  // namespace
+
+void LearnedDescriptor::save(const std::string& path) const {
+  const auto& c = config();
+  torch::serialize::OutputArchive a;
+  a.write("meta.format", c10::IValue(std::string("cellsight-learned-descriptor-1")));
+  a.write("meta.dims", c10::IValue(static_cast<int64_t>(c.dims)));
+  a.write("meta.rotation", c10::IValue(c.rotation));
+  a.write("meta.unit", c10::IValue(c.unit));
+  a.write("meta.width", c10::IValue(static_cast<int64_t>(c.width)));
+  a.write("meta.centres", c10::IValue(toInt64(c.centres)));
+  a.write("meta.radius_small", c10::IValue(c.radius_small));
+  a.write("meta.radius_large", c10::IValue(c.radius_large));
+  a.write("meta.samples_small", c10::IValue(toInt64(c.samples_small)));
+  a.write("meta.samples_large", c10::IValue(toInt64(c.samples_large)));
+  a.write("meta.point_radius", c10::IValue(c.point_radius));
+  a.write("meta.point_samples", c10::IValue(static_cast<int64_t>(c.point_samples)));
+  for (const auto& p : impl_->net->named_parameters()) a.write(p.key(), p.value().detach(), /*is_buffer=*/false);
+  const std::string tmp = path + ".tmp";
+  a.save_to(tmp);
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error("learned descriptor: cannot write " + path);
+  }
+}
+
+LearnedDescriptor LearnedDescriptor::load(const std::string& path, int expected_dims) {
+  const std::string who = "learned descriptor model " + path + ": ";
+  {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw DescriptorModelError(who + "cannot be opened (missing? make train writes it)");
+  }
+  torch::serialize::InputArchive a;
+  try {
+    a.load_from(path);
+  } catch (const std::exception& e) {
+    std::string what = e.what();
+    what = what.substr(0, what.find('\n'));
+    throw DescriptorModelError(who + "not a readable model file (truncated or not written by save()): " + what);
+  }
+  DescriptorNetConfig c;
+  try {
+    c10::IValue v;
+    a.read("meta.format", v);
+    if (!v.isString() || v.toStringRef() != "cellsight-learned-descriptor-1")
+      throw DescriptorModelError(who + "unknown format");
+    a.read("meta.dims", v);
+    c.dims = static_cast<int>(v.toInt());
+    a.read("meta.rotation", v);
+    c.rotation = v.toStringRef();
+    a.read("meta.unit", v);
+    c.unit = v.toDouble();
+    a.read("meta.width", v);
+    c.width = static_cast<int>(v.toInt());
+    a.read("meta.centres", v);
+    c.centres = toInt(v.toIntVector());
+    a.read("meta.radius_small", v);
+    c.radius_small = v.toDoubleVector();
+    a.read("meta.radius_large", v);
+    c.radius_large = v.toDoubleVector();
+    a.read("meta.samples_small", v);
+    c.samples_small = toInt(v.toIntVector());
+    a.read("meta.samples_large", v);
+    c.samples_large = toInt(v.toIntVector());
+    a.read("meta.point_radius", v);
+    c.point_radius = v.toDouble();
+    a.read("meta.point_samples", v);
+    c.point_samples = static_cast<int>(v.toInt());
+  } catch (const DescriptorModelError&) {
+    throw;
+  } catch (const std::exception& e) {
+    std::string what = e.what();
+    throw DescriptorModelError(who + "architecture record missing or malformed: " + what.substr(0, what.find('\n')));
+  }
+  checkDescriptorNetConfig(c);
+  if (expected_dims > 0 && c.dims != expected_dims)
+    throw DescriptorModelError(who + "has K = " + std::to_string(c.dims) + " features per point, the configuration asks for " +
+                               std::to_string(expected_dims));
+  LearnedDescriptor d(c);
+  torch::NoGradGuard no_grad;
+  for (auto& p : d.impl_->net->named_parameters()) {
+    torch::Tensor t;
+    try {
+      a.read(p.key(), t);
+    } catch (const std::exception&) {
+      throw DescriptorModelError(who + "tensor '" + p.key() + "' missing");
+    }
+    if (t.sizes() != p.value().sizes()) {
+      std::ostringstream os;
+      os << who << "tensor '" << p.key() << "' has shape " << t.sizes() << ", the network needs " << p.value().sizes();
+      throw DescriptorModelError(os.str());
+    }
+    if (!torch::isfinite(t).all().item<bool>()) throw DescriptorModelError(who + "tensor '" + p.key() + "' holds NaN or Inf");
+    p.value().copy_(t);
+  }
+  d.impl_->net->eval();
+  return d;
+}
+
+Eigen::MatrixXf LearnedDescriptor::compute(const std::vector<Eigen::Vector3f>& points,
+                                           const std::vector<Eigen::Vector3f>& normals, double scale,
+                                           DescriptorTiming* timing) const {
+  if (points.size() != normals.size())
+    throw std::invalid_argument("learned descriptor: " + std::to_string(points.size()) + " points but " +
+                                std::to_string(normals.size()) + " normals");
+  if (points.size() > max_points)
+    throw std::invalid_argument("learned descriptor: " + std::to_string(points.size()) + " points, at most " +
+                                std::to_string(max_points) + " (thin the cloud to the matching voxel first)");
+  if (!(scale > 0) || !std::isfinite(scale)) throw std::invalid_argument("learned descriptor: scale must be > 0");
+  const auto& c = config();
+  const float k = static_cast<float>(scale / c.unit);
+  std::vector<Eigen::Vector3f> p, n;
+  std::vector<int> row;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (!points[i].allFinite()) continue;
+    p.push_back(points[i] * k);
+    const bool ok = normals[i].allFinite() && normals[i].norm() > 0.5f;
+    n.push_back(ok ? Eigen::Vector3f(normals[i].normalized()) : Eigen::Vector3f::Zero());
+    row.push_back(static_cast<int>(i));
+  }
+  if (p.size() < 2) throw std::invalid_argument("learned descriptor: fewer than 2 finite points");
+  const auto t0 = std::chrono::steady_clock::now();
+  const descriptor_detail::Structure s = descriptor_detail::buildStructure(p, n, c);
+  const auto t1 = std::chrono::steady_clock::now();
+  torch::InferenceMode guard;
+  const torch::Tensor out = impl_->net->forward(s).contiguous();
+  const auto t2 = std::chrono::steady_clock::now();
+  if (timing) {
+    timing->structure_seconds = std::chrono::duration<double>(t1 - t0).count();
+    timing->network_seconds = std::chrono::duration<double>(t2 - t1).count();
+  }
+  Eigen::MatrixXf d = Eigen::MatrixXf::Zero(static_cast<Eigen::Index>(points.size()), c.dims);
+  const float* o = out.data_ptr<float>();
+  for (size_t i = 0; i < row.size(); ++i)
+    for (int j = 0; j < c.dims; ++j) d(row[i], j) = o[i * c.dims + j];
+  return d;
+}
+
+std::vector<Eigen::Matrix3f> descriptorTurns(int n) {
+  std::mt19937_64 rng(12345);
+  std::normal_distribution<double> N(0, 1);
+  std::vector<Eigen::Matrix3f> out;
+  for (int turn = 0; turn < n; ++turn) {
+    Eigen::Matrix3f R = Eigen::Matrix3f::Identity();
+    if (turn > 0) R = Eigen::Quaterniond(N(rng), N(rng), N(rng), N(rng)).normalized().toRotationMatrix().cast<float>();
+    out.push_back(R);
+  }
+  return out;
+}
+
+std::vector<std::pair<int, int>> matchDescriptors(const Eigen::MatrixXf& a, const Eigen::MatrixXf& b, bool mutual,
+                                                  int min_mutual) {
+  std::vector<std::pair<int, int>> one_way, both;
+  if (a.rows() == 0 || b.rows() == 0 || a.cols() != b.cols()) return one_way;
+  // squared distances from one matrix product: |a|² + |b|² − 2 a·b
+  const Eigen::MatrixXf dot = a * b.transpose();
+  const Eigen::VectorXf na = a.rowwise().squaredNorm(), nb = b.rowwise().squaredNorm();
+  std::vector<int> best_a(a.rows(), -1), best_b(b.rows(), -1);
+  std::vector<float> sa(a.rows(), std::numeric_limits<float>::max()), sb(b.rows(), std::numeric_limits<float>::max());
+  for (Eigen::Index j = 0; j < b.rows(); ++j) {
+    if (nb(j) <= 0) continue;
+    for (Eigen::Index i = 0; i < a.rows(); ++i) {
+      if (na(i) <= 0) continue;
+      const float d = na(i) + nb(j) - 2 * dot(i, j);
+      if (d < sa[i]) sa[i] = d, best_a[i] = static_cast<int>(j);
+      if (d < sb[j]) sb[j] = d, best_b[j] = static_cast<int>(i);
+    }
+  }
+  for (Eigen::Index i = 0; i < a.rows(); ++i) {
+    if (best_a[i] < 0) continue;
+    one_way.emplace_back(static_cast<int>(i), best_a[i]);
+    if (best_b[best_a[i]] == i) both.emplace_back(static_cast<int>(i), best_a[i]);
+  }
+  if (mutual && static_cast<int>(both.size()) >= min_mutual) return both;
+  return one_way;
+}
+
+}  // namespace cellsight
