@@ -36,6 +36,11 @@ check "scanner_accuracy sim --help" 0 "--scene" "$BIN/cellsight_scanner_accuracy
 check "plan cycles --help" 0 "--limit-sigma-mm" "$BIN/cellsight_plan" cycles --help
 check "plan cycles --cycels" 1 "--cycels" "$BIN/cellsight_plan" cycles --cycels 3
 check "plan cycles --cycles 0" 1 "--cycles" "$BIN/cellsight_plan" cycles --cycles 0
+check "train_descriptor --dims 8" 1 "--dims" "$BIN/cellsight_train_descriptor" --dims 8 --steps 1
+check "train_descriptor --rotation spin" 1 "--rotation" "$BIN/cellsight_train_descriptor" --rotation spin --steps 1
+check "train_descriptor --mesh missing" 1 "cannot open" "$BIN/cellsight_train_descriptor" --mesh /nonexistent.ply --steps 1 --generated 0 --output /tmp/cs_cli_flags.pt --quiet
+check "evaluate_localization descriptors --help" 0 "--limit-beats-fpfh" "$BIN/cellsight_evaluate_localization" descriptors --help
+check "evaluate_localization descriptors missing model" 1 "cannot be opened" "$BIN/cellsight_evaluate_localization" descriptors --learned /nonexistent.pt --views 1 --no-real
 # validate_config: a bad file is reported as ERROR only, never "ok" first
 BAD=$(mktemp -d)
 printf 'outlier_k: -5\n' >"$BAD/scanner.yaml"

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <numeric>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -44,7 +45,7 @@ struct Tally {
             {"feature_match_recall", pairs ? static_cast<double>(matched) / pairs : 0},
             {"mean_inlier_ratio", pairs ? inlier_ratio / pairs : 0},
             {"registration_success", pairs ? static_cast<double>(registered) / pairs : 0},
-            {"median_validation_score", validation.empty() ? 0 : median(validation)},
+            {"mean_validation_score", validation.empty() ? 0 : std::accumulate(validation.begin(), validation.end(), 0.0) / validation.size()},
             {"median_seconds", seconds.empty() ? 0 : median(seconds)},
             {"median_descriptor_seconds", descriptor_seconds.empty() ? 0 : median(descriptor_seconds)}};
   }
@@ -77,7 +78,8 @@ double validationScore(const ScanCloud& scene, const PointGrid& surface, const E
   return static_cast<double>(near) / scene.size();
 }
 
-/// The pose the matcher settled on: the accepted detection, else the best one validation refused.
+/// The pose the matcher settled on: the accepted detection, else the best one validation refused
+/// (a pair without any hypothesis is reported with fitness and RMSE 0: no pose).
 bool foundPose(const std::vector<PartDetection>& dets, const MatchStats& st, Eigen::Isometry3d* pose) {
   if (!dets.empty()) {
     *pose = dets.front().pose;
@@ -85,7 +87,7 @@ bool foundPose(const std::vector<PartDetection>& dets, const MatchStats& st, Eig
   }
   const PartDetection* best = nullptr;
   for (const auto& d : st.rejected)
-    if (!best || d.score > best->score) best = &d;
+    if ((d.fitness > 0 || d.rmse > 0) && (!best || d.score > best->score)) best = &d;
   if (!best) return false;
   *pose = best->pose;
   return true;
@@ -199,7 +201,8 @@ int runDescriptorEvaluation(const DescriptorEvalOptions& o) {
       const Tally& t = tallies[k][id];
       std::printf("%-14s %-42s recall %.3f inliers %.3f success %5.1f %% score %.2f  %.3f s\n", id.c_str(),
                   methods[k].name.c_str(), t.pairs ? double(t.matched) / t.pairs : 0, t.pairs ? t.inlier_ratio / t.pairs : 0,
-                  t.pairs ? 100.0 * t.registered / t.pairs : 0, t.validation.empty() ? 0 : median(t.validation),
+                  t.pairs ? 100.0 * t.registered / t.pairs : 0,
+                  t.validation.empty() ? 0 : std::accumulate(t.validation.begin(), t.validation.end(), 0.0) / t.validation.size(),
                   t.seconds.empty() ? 0 : median(t.seconds));
       std::fflush(stdout);
     }
@@ -253,10 +256,17 @@ int runDescriptorEvaluation(const DescriptorEvalOptions& o) {
     }
     for (auto& c : cases) {
       categories.push_back(c.name);
-      // the shipped settings scaled to the part, as cellsight_locate does; the network sees the
-      // cloud scaled so that the coarse voxel is the 2 mm it was trained on
-      const MatchingConfig scaled =
-          scaledMatchingConfig(MatchingConfig(), real_lib->model(c.model).bounds.diagonal().norm(), medianPointSpacing(c.scene));
+      // UWA: its tuned settings (config/matching_uwa.yaml, FPFH support 5 voxels as ours); milk:
+      // the shipped settings scaled to the part, as cellsight_locate does. The network sees the
+      // cloud scaled so that the coarse voxel is the 2 mm it was trained on.
+      MatchingConfig scaled;
+      if (c.model == "parasaurolophus") {
+        scaled = loadMatchingConfig(o.root + "/config/matching_uwa.yaml");
+        scaled.feature_radius = 5 * scaled.voxel;
+      } else {
+        scaled = scaledMatchingConfig(MatchingConfig(), real_lib->model(c.model).bounds.diagonal().norm(),
+                                      medianPointSpacing(c.scene));
+      }
       json jc = {{"scene_points", c.scene.size()}, {"reference", c.reference_kind}, {"voxel_m", scaled.voxel}};
       for (size_t k = 0; k < methods.size(); ++k) {
         MatchingConfig cfg = scaled;
