@@ -41,18 +41,25 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4d& M) {
   return T;
 }
 
+
+/// FGR on points and features already converted.
+Eigen::Isometry3d fgr(const std::vector<Eigen::Vector3f>& model, const reg::Feature& model_features,
+                      const std::vector<Eigen::Vector3f>& scene, const reg::Feature& scene_features, const FgrOptions& o) {
+  open3d::utility::random::Seed(o.seed);
+  reg::FastGlobalRegistrationOption opt(1.4, true, true, o.max_correspondence_distance, o.iterations, o.tuple_scale,
+                                        o.max_tuples, true);
+  const auto r = reg::FastGlobalRegistrationBasedOnFeatureMatching(toOpen3d(model), toOpen3d(scene), model_features,
+                                                                   scene_features, opt);
+  return toIsometry(r.transformation_);
+}
+
 }  // namespace
 
 Eigen::Isometry3d fastGlobalRegistration(const std::vector<Eigen::Vector3f>& model, const std::vector<Fpfh>& model_features,
                                          const std::vector<Eigen::Vector3f>& scene, const std::vector<Fpfh>& scene_features,
                                          const FgrOptions& o) {
   if (model.size() < 3 || scene.size() < 3) return Eigen::Isometry3d::Identity();
-  open3d::utility::random::Seed(o.seed);
-  reg::FastGlobalRegistrationOption opt(1.4, true, true, o.max_correspondence_distance, o.iterations, o.tuple_scale,
-                                        o.max_tuples, true);
-  const auto r = reg::FastGlobalRegistrationBasedOnFeatureMatching(toOpen3d(model), toOpen3d(scene), toFeature(model_features),
-                                                                   toFeature(scene_features), opt);
-  return toIsometry(r.transformation_);
+  return fgr(model, toFeature(model_features), scene, toFeature(scene_features), o);
 }
 
 Eigen::Isometry3d fastGlobalRegistration(const std::vector<Eigen::Vector3f>& model, const Eigen::MatrixXf& model_features,
@@ -62,12 +69,7 @@ Eigen::Isometry3d fastGlobalRegistration(const std::vector<Eigen::Vector3f>& mod
   if (model_features.rows() != static_cast<Eigen::Index>(model.size()) ||
       scene_features.rows() != static_cast<Eigen::Index>(scene.size()) || model_features.cols() != scene_features.cols())
     throw std::invalid_argument("fastGlobalRegistration: one feature row per point, the same length on both sides");
-  open3d::utility::random::Seed(o.seed);
-  reg::FastGlobalRegistrationOption opt(1.4, true, true, o.max_correspondence_distance, o.iterations, o.tuple_scale,
-                                        o.max_tuples, true);
-  const auto r = reg::FastGlobalRegistrationBasedOnFeatureMatching(toOpen3d(model), toOpen3d(scene), toFeature(model_features),
-                                                                   toFeature(scene_features), opt);
-  return toIsometry(r.transformation_);
+  return fgr(model, toFeature(model_features), scene, toFeature(scene_features), o);
 }
 
 Eigen::Isometry3d open3dRansac(const std::vector<Eigen::Vector3f>& model, const std::vector<Fpfh>& model_features,

@@ -91,6 +91,17 @@ inline void drawPlot(const std::string& path, const std::string& title, const st
   }
 }
 
+/// One data row: the first column, then each series' value at i (NaN where it has none).
+inline void dataRow(std::ostream& d, const std::string& first, size_t i,
+                    const std::vector<std::pair<std::string, std::vector<double>>>& series) {
+  d << first;
+  for (const auto& s : series) {
+    d << "\t";
+    if (i < s.second.size()) d << s.second[i]; else d << "NaN";
+  }
+  d << "\n";
+}
+
 /// Curves (one per series) over x as a PNG drawn by gnuplot. Beside the
 /// PNG stay the data (<png>.dat) and the script (<png>.gp), which reads the data by its file name
 /// in the PNG's folder: `cd <folder> && gnuplot <png>.gp` re-plots.
@@ -104,12 +115,9 @@ inline void plotLines(const std::string& path, const std::string& title, const s
   d << "\n";
   d << std::setprecision(10);
   for (size_t i = 0; i < x.size(); ++i) {
-    d << x[i];
-    for (const auto& s : series) {
-      d << "\t";
-      if (i < s.second.size()) d << s.second[i]; else d << "NaN";
-    }
-    d << "\n";
+    std::ostringstream xi;
+    xi << std::setprecision(10) << x[i];
+    dataRow(d, xi.str(), i, series);
   }
   std::ostringstream g;
   g << "set xlabel " << gpQuote(xlabel) << "\n"
@@ -139,12 +147,7 @@ inline void plotBars(const std::string& path, const std::string& title, const YA
   for (size_t i = 0; i < categories.size(); ++i) {
     std::string c = categories[i];
     for (char& ch : c) if (ch == ' ' || ch == '\t') ch = '_';
-    d << c;
-    for (const auto& s : series) {
-      d << "\t";
-      if (i < s.second.size()) d << s.second[i]; else d << "NaN";
-    }
-    d << "\n";
+    dataRow(d, c, i, series);
   }
   std::ostringstream g;
   g << "set ylabel " << gpQuote(y.label) << "\n"

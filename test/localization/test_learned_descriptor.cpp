@@ -173,6 +173,25 @@ TEST(LearnedDescriptor, MatcherFallsBackToFpfhOrRefuses) {
   EXPECT_NE(st.warnings.front().find("descriptor: fpfh is used instead"), std::string::npos);
 }
 
+TEST(LearnedDescriptor, RansacAndFgrRunOnLearnedFeatures) {
+  auto lib = std::make_shared<const ModelLibrary>(kRoot + "/config/models");
+  const LaserView v = someView("flanged_shaft", 15);
+  for (const std::string coarse : {"ransac", "fgr"}) {
+    MatchingConfig c;
+    c.coarse = coarse;
+    c.descriptor = "learned";
+    c.learned_model = kRoot + "/config/descriptors/learned_k16.pt";
+    c.learned_fallback = false;
+    c.max_iterations = 5000;
+    c.min_coverage = 0;
+    const ModelMatcher m(lib, c);
+    MatchStats st;
+    m.locate({v.cloud}, {"flanged_shaft"}, &st);
+    EXPECT_GT(st.descriptor_seconds, 0) << coarse;
+    EXPECT_TRUE(st.warnings.empty()) << coarse;
+  }
+}
+
 TEST(LearnedDescriptor, ConfigurationKeysAreChecked) {
   const std::string dir = cellsight_test::tempDir();
   auto load = [&](const std::string& text) {
