@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Reproduces the shipped learned-descriptor models (config/descriptors/): the trainer with the
 # settings they were made with, on this machine's CPUs. Usage: scripts/train.sh <build> [lrf|augment|all]
-# Parts held out of training (the evaluation's unseen parts): blade and holder.
+# Parts held out of training (the evaluation's unseen parts): blade and holder. An interrupted run
+# resumes from <build>/train_*.ckpt; delete them to train from scratch.
 set -euo pipefail
 BUILD=${1:-_build}
 WHICH=${2:-all}
