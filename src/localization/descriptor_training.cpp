@@ -72,15 +72,8 @@ DescriptorTrainingReport trainDescriptor(const DescriptorTrainingConfig& cfg,
     if (log) log(s);
   };
   std::vector<TriangleMesh> meshes;
-  std::vector<std::string> names;
-  for (const auto& path : cfg.model_meshes) {
-    meshes.push_back(loadValidMesh(path));
-    names.push_back(path);
-  }
-  for (int i = 0; i < cfg.generated_meshes; ++i) {
-    meshes.push_back(randomPartMesh(cfg.seed * 1000 + static_cast<uint64_t>(i)));
-    names.push_back("generated " + std::to_string(i));
-  }
+  for (const auto& path : cfg.model_meshes) meshes.push_back(loadValidMesh(path));
+  for (int i = 0; i < cfg.generated_meshes; ++i) meshes.push_back(randomPartMesh(cfg.seed * 1000 + static_cast<uint64_t>(i)));
   std::map<size_t, LaserView> model_clouds;
   std::map<size_t, ScanCloud> dense;  // each mesh's surface samples, shared by its views
   auto view = [&](size_t m, const Eigen::Isometry3d& pose, uint64_t vseed) {
@@ -134,18 +127,12 @@ DescriptorTrainingReport trainDescriptor(const DescriptorTrainingConfig& cfg,
   }
   {
     // the reference: FPFH (10 mm support, as the matcher's ransac / fgr paths) on the same pairs
-    auto fpfh = [](const LaserView& v) {
-      const auto f = computeFpfh(v.cloud, 0.010);
-      Eigen::MatrixXf m(static_cast<Eigen::Index>(f.size()), 33);
-      for (size_t i = 0; i < f.size(); ++i)
-        for (int k = 0; k < 33; ++k) m(static_cast<Eigen::Index>(i), k) = f[i][k];
-      return m;
-    };
     int hit = 0;
     double ratio = 0;
     for (const auto& [s, model] : validation) {
-      const PairMatchFigures f = pairMatchFigures(s.view, fpfh(s.view), *model, fpfh(*model), 0.004);
-      hit += f.inlier_ratio >= 0.05;
+      const PairMatchFigures f =
+          pairMatchFigures(s.view, fpfhRows(s.view.cloud, 0.010), *model, fpfhRows(model->cloud, 0.010), 0.004);
+      hit += f.matched();
       ratio += f.inlier_ratio;
     }
     const double n = std::max<size_t>(1, validation.size());
@@ -170,7 +157,7 @@ DescriptorTrainingReport trainDescriptor(const DescriptorTrainingConfig& cfg,
       const Eigen::MatrixXf da = toEigen(module->forward(s.structure));
       const Eigen::MatrixXf db = toEigen(module->forward(it->second.structure));
       const PairMatchFigures f = pairMatchFigures(s.view, da, it->second.view, db, 0.004);
-      hit += f.inlier_ratio >= 0.05;
+      hit += f.matched();
       ratio += f.inlier_ratio;
     }
     module->train();

@@ -232,6 +232,14 @@ std::vector<std::pair<int, int>> trueCorrespondences(const LaserView& a, const L
   return out;
 }
 
+Eigen::MatrixXf fpfhRows(const ScanCloud& c, double radius) {
+  const auto f = computeFpfh(c, radius);
+  Eigen::MatrixXf m(static_cast<Eigen::Index>(f.size()), 33);
+  for (size_t i = 0; i < f.size(); ++i)
+    for (int k = 0; k < 33; ++k) m(static_cast<Eigen::Index>(i), k) = f[i][k];
+  return m;
+}
+
 PairMatchFigures pairMatchFigures(const LaserView& a, const Eigen::MatrixXf& da, const LaserView& b,
                                   const Eigen::MatrixXf& db, double tolerance) {
   PairMatchFigures f;

@@ -27,7 +27,6 @@ using namespace cellsight;
 using json = nlohmann::json;
 constexpr double kDeg = M_PI / 180;
 constexpr double kMaxT = 0.020, kMaxR = 7.5 * kDeg;  // registration success (the thesis's UWA criterion)
-constexpr double kRecallShare = 0.05;                // a pair "matched": ≥ 5 % correct matches (3DMatch)
 
 struct Method {
   std::string name;
@@ -50,14 +49,6 @@ struct Tally {
             {"median_descriptor_seconds", descriptor_seconds.empty() ? 0 : median(descriptor_seconds)}};
   }
 };
-
-Eigen::MatrixXf fpfhRows(const ScanCloud& c, double radius) {
-  const auto f = computeFpfh(c, radius);
-  Eigen::MatrixXf m(static_cast<Eigen::Index>(f.size()), 33);
-  for (size_t i = 0; i < f.size(); ++i)
-    for (int k = 0; k < 33; ++k) m(static_cast<Eigen::Index>(i), k) = f[i][k];
-  return m;
-}
 
 ScanCloud turned(const ScanCloud& c, const Eigen::Matrix3f& R) {
   ScanCloud out = c;
@@ -188,7 +179,7 @@ int runDescriptorEvaluation(const DescriptorEvalOptions& o) {
         for (const std::string& key : {id, std::string(unseen ? "unseen parts" : "trained parts"), std::string("all")}) {
           Tally& t = tallies[k][key];
           ++t.pairs;
-          t.matched += ratio >= kRecallShare;
+          t.matched += ratio >= kMatchedPairShare;
           t.inlier_ratio += ratio;
           t.registered += ok;
           t.validation.push_back(score);

@@ -192,6 +192,31 @@ TEST(LearnedDescriptor, RansacAndFgrRunOnLearnedFeatures) {
   }
 }
 
+TEST(LearnedDescriptor, ClusterTooLargeForTheNetworkIsAWarning) {
+  // more coarse points than the network takes: the matcher warns and goes on (no throw from a
+  // worker thread, which would end the process)
+  auto lib = std::make_shared<const ModelLibrary>(kRoot + "/config/models");
+  MatchingConfig c;
+  c.coarse = "ransac";
+  c.descriptor = "learned";
+  c.learned_model = kRoot + "/config/descriptors/learned_k16.pt";
+  c.learned_fallback = false;
+  c.voxel = 0.0002;
+  c.max_iterations = 10;
+  c.min_coverage = 0;
+  c.max_instances = 1;
+  const ModelMatcher m(lib, c);
+  ScanCloud huge;
+  std::mt19937_64 rng(1);
+  std::uniform_real_distribution<float> U(0.f, 0.2f);
+  for (size_t i = 0; i < LearnedDescriptor::max_points + 20000; ++i) huge.append(Eigen::Vector3f(U(rng), U(rng), U(rng)), 1.f);
+  MatchStats st;
+  EXPECT_NO_THROW(m.locate({huge}, {"blade"}, &st));
+  bool warned = false;
+  for (const auto& w : st.warnings) warned = warned || w.find("at most") != std::string::npos;
+  EXPECT_TRUE(warned);
+}
+
 TEST(LearnedDescriptor, ConfigurationKeysAreChecked) {
   const std::string dir = cellsight_test::tempDir();
   auto load = [&](const std::string& text) {
@@ -211,26 +236,19 @@ TEST(LearnedDescriptor, ConfigurationKeysAreChecked) {
 // (docs/learned_descriptors.md says what and how much).
 TEST(LearnedDescriptor, ShippedModelRecallOnHeldOutPairs) {
   const LearnedDescriptor net = LearnedDescriptor::load(kRoot + "/config/descriptors/learned_k16.pt", 16);
-  auto fpfh = [](const ScanCloud& c) {
-    const auto f = computeFpfh(c, 0.010);  // the matcher's feature_radius
-    Eigen::MatrixXf m(static_cast<Eigen::Index>(f.size()), 33);
-    for (size_t i = 0; i < f.size(); ++i)
-      for (int k = 0; k < 33; ++k) m(static_cast<Eigen::Index>(i), k) = f[i][k];
-    return m;
-  };
   int pairs = 0, matched = 0, matched_fpfh = 0;
   double ratio = 0;
   for (const std::string part : {"housing", "blade", "holder"}) {
     const LaserView model = modelCloud(loadValidMesh(kRoot + "/config/models/" + part + "/mesh.ply"));
-    const Eigen::MatrixXf dm = net.compute(model.cloud.points, model.cloud.normals), fm = fpfh(model.cloud);
+    const Eigen::MatrixXf dm = net.compute(model.cloud.points, model.cloud.normals), fm = fpfhRows(model.cloud, 0.010);
     for (uint64_t s = 0; s < 6; ++s) {
       const LaserView v = someView(part, 400000000ull + s);
       if (v.cloud.size() < 30) continue;
       const auto f = pairMatchFigures(v, net.compute(v.cloud.points, v.cloud.normals), model, dm, 0.004);
       ++pairs;
-      matched += f.inlier_ratio >= 0.05;
+      matched += f.matched();
       ratio += f.inlier_ratio;
-      matched_fpfh += pairMatchFigures(v, fpfh(v.cloud), model, fm, 0.004).inlier_ratio >= 0.05;
+      matched_fpfh += pairMatchFigures(v, fpfhRows(v.cloud, 0.010), model, fm, 0.004).matched();  // the matcher's feature_radius
     }
   }
   ASSERT_GE(pairs, 15);

@@ -55,11 +55,19 @@ TriangleMesh randomPartMesh(uint64_t seed);
 /// with its nearest in b).
 std::vector<std::pair<int, int>> trueCorrespondences(const LaserView& a, const LaserView& b, double tolerance);
 
+/// FPFH of a cloud with normals (PCL, support `radius`) as descriptor rows, for matchDescriptors.
+Eigen::MatrixXf fpfhRows(const ScanCloud& cloud_with_normals, double radius);
+
+/// A pair counts towards feature-match recall when at least this share of its matches is
+/// correct (the 3DMatch convention).
+constexpr double kMatchedPairShare = 0.05;
+
 /// The 3DMatch-style figures of one pair: descriptors matched (nearest in b for every point of a,
 /// mutual when enough), a match correct when its true positions lie within `tolerance`.
 struct PairMatchFigures {
   size_t matches = 0, correct = 0;
   double inlier_ratio = 0;  ///< correct / matches
+  bool matched() const { return inlier_ratio >= kMatchedPairShare; }
 };
 PairMatchFigures pairMatchFigures(const LaserView& a, const Eigen::MatrixXf& da, const LaserView& b,
                                   const Eigen::MatrixXf& db, double tolerance);

@@ -333,6 +333,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     std::vector<Vec3> points;
     std::unique_ptr<SceneData> scene;
     double scene_seconds = 0, descriptor_seconds = 0;
+    std::string warning;  // of its scene preparation
     double min_coverage = 1e9;  // asked of a detection here: the config's, less on a second look
     std::vector<PartDetection> per_model;
   };
@@ -370,7 +371,11 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       if (learned_ && cfg.descriptor == "learned" && round[i].scene->coarse.size() >= 3) {
         const auto td = Clock::now();
         SceneData& sd = *round[i].scene;
-        sd.learned = learned_->compute(sd.coarse.points, sd.coarse.normals, cfg.learned_scale);
+        try {
+          sd.learned = learned_->compute(sd.coarse.points, sd.coarse.normals, cfg.learned_scale);
+        } catch (const std::invalid_argument& e) {  // a cluster too large for the network: no matches
+          round[i].warning = "cluster " + std::to_string(round[i].cluster) + ": " + e.what();
+        }
         round[i].descriptor_seconds = seconds(td);
       }
       round[i].scene_seconds = seconds(t);
@@ -378,6 +383,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     for (const auto& w : round) {
       st.scene_seconds += w.scene_seconds;
       st.descriptor_seconds += w.descriptor_seconds;
+      if (!w.warning.empty()) st.warnings.push_back(w.warning);
     }
     std::vector<std::pair<size_t, size_t>> pairs;
     // a cluster larger than every model holds several parts (touching ones that clustering
