@@ -21,6 +21,16 @@ taskset -c 0 "$TOOLS/cellsight_plan" cycles --root "$ROOT" --cycles 3 --true-pos
   --calibration "$WORK/calibration" --limit-max-mm 0.001 --limit-success 1 --json "$WORK/chain.json" ||
   { echo "FAIL: the planning chain on true poses with an exact robot (see $WORK/chain.json)"; exit 1; }
 taskset -c 0 "$TOOLS/cellsight_plan" cycles --root "$ROOT" --cycles 8 --calibration "$WORK/calibration" \
-  --limit-success 1 --limit-median-plan-ms 100 --limit-sigma-mm 1.5 --limit-sigma-deg 0.8 --json "$WORK/cycles.json" ||
+  --limit-success 1 --limit-median-plan-ms 100 --limit-sigma-mm 1.5 --limit-sigma-deg 0.8 --json "$WORK/cycles.json" \
+  --dump-scans "$WORK" ||
   { echo "FAIL: self-calibrated cycles (see $WORK/cycles.json)"; exit 1; }
+# the error budget's localisation rows: every located model's scatter, and the scans it came from
+python3 - "$WORK/cycles.json" <<'PY' || exit 1
+import json, sys
+parts = json.load(open(sys.argv[1]))["parts"]
+missing = [m for m in ("bracket", "housing", "flanged_shaft", "blade", "holder") if len(parts.get(m, {}).get("locate_sigma_mm", [])) != 3]
+if missing:
+    sys.exit("FAIL: no localisation sigma for " + ", ".join(missing))
+PY
+for s in 1 8; do [ -s "$WORK/scan_$s.ply" ] || { echo "FAIL: --dump-scans wrote no scan_$s.ply"; exit 1; }; done
 echo "PASS"

@@ -112,6 +112,7 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
   if (m.settings.has_workspace) cloud = cropBox(cloud, m.settings.workspace);
   cloud = statisticalOutlierRemoval(cloud, m.settings.outlier_k, m.settings.outlier_std);
   rep.scan_seconds = now() - t0;
+  if (!m.config.dump_scans.empty()) saveCloud(m.config.dump_scans + "/scan_" + std::to_string(seed) + ".ply", cloud);
   rep.scan_points = cloud.size();
   t0 = now();
   const ClusteringResult cr = clusterScene(cloud, m.clustering);
@@ -149,6 +150,10 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
     const SceneObject& o = m.scene.objects[static_cast<size_t>(truth[i])];
     const PoseError e = poseError(o.info, m.models.at(o.model).second->surfaceCentroid(), parts[i].pose, o.T_base_object);
     rep.locate_errors[parts[i].name] = {e.translation * 1e3, e.rotation * 180 / M_PI};
+    Eigen::Vector3d off, rot;
+    placementDeviation(o.info, m.models.at(o.model).second->surfaceCentroid(), parts[i].pose, o.T_base_object, &off, &rot);
+    rep.locate_deviations[parts[i].name] = {off * 1e3, rot * 180 / M_PI};
+    rep.located_models[parts[i].name] = parts[i].model;
   }
   t0 = now();
   CollisionWorld world(CollisionWorldConfig{}, m.scene.table.z, m.scene.table.center, m.scene.table.size);

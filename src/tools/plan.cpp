@@ -41,7 +41,7 @@ struct CyclesOptions {
   long first_seed = 1;
   double limit_sigma_mm = 0, limit_sigma_deg = 0, limit_median_plan_ms = 0, limit_success = 0, limit_max_mm = 0;
   bool exact_robot = false, true_poses = false;
-  std::string trajectory = "demo_sweep";
+  std::string trajectory = "demo_sweep", dump_scans;
 };
 
 int runCycles(const CyclesOptions& o) {
@@ -52,6 +52,7 @@ int runCycles(const CyclesOptions& o) {
   cfg.exact_robot = o.exact_robot;
   cfg.trajectory = o.trajectory;
   cfg.true_poses = o.true_poses;
+  cfg.dump_scans = o.dump_scans;
   PlanningEvaluation ev(cfg);
   json out = {{"scene", o.scene},
               {"exact_robot", o.exact_robot},
@@ -59,7 +60,7 @@ int runCycles(const CyclesOptions& o) {
               {"true_poses", o.true_poses},
               {"calibration", o.calibration.empty() ? "the simulator's true calibration (not the system's figure)" : o.calibration},
               {"cycles", json::array()}};
-  std::map<std::string, std::vector<Eigen::Vector3d>> offsets, rotations;
+  std::map<std::string, std::vector<Eigen::Vector3d>> offsets, rotations, loc_offsets, loc_rotations;
   std::map<std::string, std::vector<double>> terr, rerr;
   std::vector<double> plan_ms;
   int attempted = 0, placed = 0;
@@ -70,7 +71,15 @@ int runCycles(const CyclesOptions& o) {
                {"voxels", r.voxels},     {"scan_seconds", r.scan_seconds},   {"locate_seconds", r.locate_seconds},
                {"world_seconds", r.world_seconds}, {"plan_seconds", r.plan_seconds}, {"placements", json::array()}};
     cj["locate_errors"] = json::object();
-    for (const auto& [name, e] : r.locate_errors) cj["locate_errors"][name] = {{"t_err_mm", e.first}, {"r_err_deg", e.second}};
+    for (const auto& [name, e] : r.locate_errors) {
+      const auto& dev = r.locate_deviations.at(name);
+      cj["locate_errors"][name] = {{"t_err_mm", e.first},
+                                   {"r_err_deg", e.second},
+                                   {"offset_mm", {dev.first.x(), dev.first.y(), dev.first.z()}},
+                                   {"rotation_deg", {dev.second.x(), dev.second.y(), dev.second.z()}}};
+      loc_offsets[r.located_models.at(name)].push_back(dev.first);
+      loc_rotations[r.located_models.at(name)].push_back(dev.second);
+    }
     int ok = 0;
     for (const PlacementResult& p : r.placements) {
       json pj = {{"name", p.name},         {"model", p.model},       {"status", p.status},
@@ -99,20 +108,25 @@ int runCycles(const CyclesOptions& o) {
                 r.locate_seconds, r.plan_seconds * 1e3);
     std::fflush(stdout);
   }
+  // per-axis sample standard deviations (and the mean) of a model's vectors over the cycles
+  auto spread = [](const std::vector<Eigen::Vector3d>& v, Eigen::Vector3d* mean) {
+    Eigen::Vector3d sd;
+    mean->setZero();
+    for (int a = 0; a < 3; ++a) {
+      std::vector<double> x;
+      for (const auto& e : v) {
+        x.push_back(e[a]);
+        (*mean)[a] += e[a] / static_cast<double>(v.size());
+      }
+      sd[a] = stddev(x);
+    }
+    return sd;
+  };
   json parts = json::object();
   double worst_sigma_mm = 0, worst_sigma_deg = 0;
   for (const auto& [model, offs] : offsets) {
-    Eigen::Vector3d sd_t, sd_r, mean_t = Eigen::Vector3d::Zero();
-    for (int a = 0; a < 3; ++a) {
-      std::vector<double> t, r;
-      for (size_t i = 0; i < offs.size(); ++i) {
-        t.push_back(offs[i][a]);
-        r.push_back(rotations[model][i][a]);
-        mean_t[a] += offs[i][a] / static_cast<double>(offs.size());
-      }
-      sd_t[a] = stddev(t);
-      sd_r[a] = stddev(r);
-    }
+    Eigen::Vector3d mean_t, mean_r;
+    const Eigen::Vector3d sd_t = spread(offs, &mean_t), sd_r = spread(rotations[model], &mean_r);
     worst_sigma_mm = std::max(worst_sigma_mm, sd_t.maxCoeff());
     worst_sigma_deg = std::max(worst_sigma_deg, sd_r.maxCoeff());
     parts[model] = {{"placements", offs.size()},
@@ -123,6 +137,19 @@ int runCycles(const CyclesOptions& o) {
                     {"max_t_err_mm", *std::max_element(terr[model].begin(), terr[model].end())},
                     {"median_r_err_deg", median(rerr[model])},
                     {"max_r_err_deg", *std::max_element(rerr[model].begin(), rerr[model].end())}};
+  }
+  // where the placement scatter comes from: the located poses' own scatter (picked and base part)
+  std::printf("localisation over the cycles (located vs true pose, base frame):\n");
+  for (const auto& [model, offs] : loc_offsets) {
+    Eigen::Vector3d mean_t, mean_r;
+    const Eigen::Vector3d sd_t = spread(offs, &mean_t), sd_r = spread(loc_rotations[model], &mean_r);
+    parts[model]["locate_sigma_mm"] = {sd_t.x(), sd_t.y(), sd_t.z()};
+    parts[model]["locate_sigma_deg"] = {sd_r.x(), sd_r.y(), sd_r.z()};
+    parts[model]["locate_mean_offset_mm"] = {mean_t.x(), mean_t.y(), mean_t.z()};
+    parts[model]["locate_mean_rotation_deg"] = {mean_r.x(), mean_r.y(), mean_r.z()};
+    std::printf("  %-14s n %2zu  sigma %.3f %.3f %.3f mm  %.3f %.3f %.3f deg  mean %+.3f %+.3f %+.3f mm  %+.3f %+.3f %+.3f deg\n",
+                model.c_str(), offs.size(), sd_t.x(), sd_t.y(), sd_t.z(), sd_r.x(), sd_r.y(), sd_r.z(), mean_t.x(),
+                mean_t.y(), mean_t.z(), mean_r.x(), mean_r.y(), mean_r.z());
   }
   out["parts"] = parts;
   out["placed"] = placed;
@@ -316,6 +343,8 @@ int main(int argc, char** argv) {
   cycles->add_option("--first-seed", co.first_seed, "noise seed of the first cycle")->check(cellsight_tools::nonNegativeInt())
       ->capture_default_str();
   cycles->add_option("--json", co.json_path, "write the figures here");
+  cycles->add_option("--dump-scans", co.dump_scans, "write every cycle's finished scan here (scan_<seed>.ply)")
+      ->check(CLI::ExistingDirectory);
   cycles->add_option("--trajectory", co.trajectory, "the scan's trajectory (config/trajectories.yaml)")->capture_default_str();
   cycles->add_option("--limit-sigma-mm", co.limit_sigma_mm, "exit 3 when a placement sigma exceeds this (mm)")
       ->check(cellsight_tools::nonNegative());

@@ -20,6 +20,7 @@ struct PlanningEvalConfig {
   std::string scene = "config/scenes/demo.yaml"; ///< relative to root unless absolute
   std::string calibration;                       ///< calibration folder; empty: the simulator's truth
   std::string trajectory = "demo_sweep";
+  std::string dump_scans;  ///< write every cycle's finished scan here as scan_<seed>.ply (empty: none)
   MotionPlannerConfig motion;
   GripperConfig gripper;
   // error budget rows (diagnostics, never the system's figure)
@@ -47,6 +48,10 @@ struct CycleReport {
   std::vector<PlacementResult> placements;
   /// each located part's pose error against its truth (mm, deg; symmetry-aware), by instance name
   std::map<std::string, std::pair<double, double>> locate_errors;
+  /// the same as vectors (placementDeviation of the located pose against the truth): centroid
+  /// offset (mm) and rotation vector (deg), base frame, by instance name; model by instance name
+  std::map<std::string, std::pair<Eigen::Vector3d, Eigen::Vector3d>> locate_deviations;
+  std::map<std::string, std::string> located_models;
 };
 
 /// Where the true part ends when `plan` is executed by `robot` (the controller holds the plan's
