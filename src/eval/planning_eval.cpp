@@ -149,11 +149,9 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
     if (truth[i] < 0 || !m.models.count(parts[i].model)) continue;
     const SceneObject& o = m.scene.objects[static_cast<size_t>(truth[i])];
     const PoseError e = poseError(o.info, m.models.at(o.model).second->surfaceCentroid(), parts[i].pose, o.T_base_object);
-    rep.locate_errors[parts[i].name] = {e.translation * 1e3, e.rotation * 180 / M_PI};
     Eigen::Vector3d off, rot;
     placementDeviation(o.info, m.models.at(o.model).second->surfaceCentroid(), parts[i].pose, o.T_base_object, &off, &rot);
-    rep.locate_deviations[parts[i].name] = {off * 1e3, rot * 180 / M_PI};
-    rep.located_models[parts[i].name] = parts[i].model;
+    rep.locate_errors[parts[i].name] = {parts[i].model, e.translation * 1e3, e.rotation * 180 / M_PI, off * 1e3, rot * 180 / M_PI};
   }
   t0 = now();
   CollisionWorld world(CollisionWorldConfig{}, m.scene.table.z, m.scene.table.center, m.scene.table.size);

@@ -72,13 +72,12 @@ int runCycles(const CyclesOptions& o) {
                {"world_seconds", r.world_seconds}, {"plan_seconds", r.plan_seconds}, {"placements", json::array()}};
     cj["locate_errors"] = json::object();
     for (const auto& [name, e] : r.locate_errors) {
-      const auto& dev = r.locate_deviations.at(name);
-      cj["locate_errors"][name] = {{"t_err_mm", e.first},
-                                   {"r_err_deg", e.second},
-                                   {"offset_mm", {dev.first.x(), dev.first.y(), dev.first.z()}},
-                                   {"rotation_deg", {dev.second.x(), dev.second.y(), dev.second.z()}}};
-      loc_offsets[r.located_models.at(name)].push_back(dev.first);
-      loc_rotations[r.located_models.at(name)].push_back(dev.second);
+      cj["locate_errors"][name] = {{"t_err_mm", e.t_err_mm},
+                                   {"r_err_deg", e.r_err_deg},
+                                   {"offset_mm", {e.offset_mm.x(), e.offset_mm.y(), e.offset_mm.z()}},
+                                   {"rotation_deg", {e.rotation_deg.x(), e.rotation_deg.y(), e.rotation_deg.z()}}};
+      loc_offsets[e.model].push_back(e.offset_mm);
+      loc_rotations[e.model].push_back(e.rotation_deg);
     }
     int ok = 0;
     for (const PlacementResult& p : r.placements) {

@@ -40,18 +40,22 @@ struct PlacementResult {
   int candidates_tried = 0;
 };
 
+/// A located part against its truth: the error (symmetry-aware) and its components
+/// (placementDeviation of the located pose against the true one, base frame).
+struct LocateError {
+  std::string model;
+  double t_err_mm = 0, r_err_deg = 0;
+  Eigen::Vector3d offset_mm = Eigen::Vector3d::Zero(), rotation_deg = Eigen::Vector3d::Zero();
+};
+
 struct CycleReport {
   uint64_t seed = 0;
   size_t scan_points = 0, located = 0;
   double scan_seconds = 0, locate_seconds = 0, plan_seconds = 0, world_seconds = 0;
   size_t voxels = 0;
   std::vector<PlacementResult> placements;
-  /// each located part's pose error against its truth (mm, deg; symmetry-aware), by instance name
-  std::map<std::string, std::pair<double, double>> locate_errors;
-  /// the same as vectors (placementDeviation of the located pose against the truth): centroid
-  /// offset (mm) and rotation vector (deg), base frame, by instance name; model by instance name
-  std::map<std::string, std::pair<Eigen::Vector3d, Eigen::Vector3d>> locate_deviations;
-  std::map<std::string, std::string> located_models;
+  /// each located part against its truth, by instance name (scoring only)
+  std::map<std::string, LocateError> locate_errors;
 };
 
 /// Where the true part ends when `plan` is executed by `robot` (the controller holds the plan's
