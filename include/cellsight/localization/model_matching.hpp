@@ -86,6 +86,13 @@ struct MatchingConfig {
   double icp_slack_tolerance = 0.0001;  ///< m
   double icp_slack_eigen_ratio = 0.01;
   int icp_slack_steps = 8;              ///< bisection steps in the bracket
+  /// Mixed points at an edge: where a scanner's line runs off an edge it reads a little below
+  /// the face, and those points are closer to the wall under the edge than to the face they lie
+  /// on. Slack centring leaves out the points of a flat face (PlanarFaces group) that has fewer
+  /// than icp_edge_support of them beyond icp_edge_band of its creases: a wall the scanner never
+  /// saw, which would otherwise end the slack wherever the polish stopped. 0 band: off.
+  double icp_edge_band = 0.001;  ///< m
+  int icp_edge_support = 3;
   /// The polish's closest points from a grid of candidate triangles per cell (ClosestPointGrid,
   /// exact; meshes up to 5 000 faces) instead of Embree's BVH point query for every point
   /// (false: the library path, kept for comparison). Same answers, measured faster on the part

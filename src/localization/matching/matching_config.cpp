@@ -98,6 +98,9 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("max_cluster_points", c.max_cluster_points);
   atLeast("icp_exact_iterations", c.icp_exact_iterations, 0);
   c.icp_mesh_polish = m.getBool("icp_mesh_polish", c.icp_mesh_polish);
+  c.icp_edge_band = m.getDouble("icp_edge_band", c.icp_edge_band);
+  if (!(c.icp_edge_band >= 0)) m.fail("icp_edge_band", "must be >= 0 (0: off)");
+  atLeast("icp_edge_support", c.icp_edge_support, 1);
   c.icp_centre_slack = m.getBool("icp_centre_slack", c.icp_centre_slack);
   positive("icp_slack_range", c.icp_slack_range);
   positive("icp_slack_tolerance", c.icp_slack_tolerance);

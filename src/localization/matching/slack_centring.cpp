@@ -6,6 +6,33 @@
 
 namespace cellsight::matching_detail {
 
+namespace {
+
+/// Leaves out the rows over flat faces the scan did not see. Where a laser line runs off an
+/// edge it reads a little below the face, and those points lie closer to the wall under the
+/// edge than to the face they are on; matched to that wall they end the slack at once, wherever
+/// the polish happened to stop. A face group whose rows all lie within icp_edge_band of its
+/// creases (fewer than icp_edge_support beyond) holds only such points.
+void dropUnseenFaces(const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg, std::vector<PolishRow>& rows) {
+  std::vector<int> support(m.faces.groups.size(), 0);
+  std::vector<char> near(rows.size(), 0);
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const PolishRow& r = rows[i];
+    if (r.outside || r.tri < 0 || m.faces.group[r.tri] < 0) continue;
+    near[i] = m.faces.creaseDistance(r.tri, r.q) < cfg.icp_edge_band;
+    if (!near[i]) ++support[m.faces.group[r.tri]];
+  }
+  size_t kept = 0;
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const PolishRow& r = rows[i];
+    if (near[i] && support[m.faces.group[r.tri]] < cfg.icp_edge_support) continue;
+    rows[kept++] = rows[i];
+  }
+  rows.resize(kept);
+}
+
+}  // namespace
+
 /// Centres the pose in its slack. A part seen from one side is often pinned only by the ends
 /// of its scanned faces: a flat top is free in-plane (two translations and the turn about its
 /// normal) while its scanned patch stays inside the face, and the patch is smaller than the face
@@ -41,6 +68,7 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
     r.n = r.outside ? Eigen::Vector3d(dv / d) : nf;
     r.r = r.outside ? d : nf.dot(dv);
   }
+  if (cfg.icp_edge_band > 0) dropUnseenFaces(m, cfg, rows);
   Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
   std::vector<double> crease(rows.size());
   for (size_t i = 0; i < rows.size(); ++i) {
