@@ -86,6 +86,7 @@ struct MatchingConfig {
   double icp_slack_tolerance = 0.0001;  ///< m
   double icp_slack_eigen_ratio = 0.01;
   int icp_slack_steps = 8;              ///< bisection steps in the bracket
+  int icp_slack_points = 8;             ///< the k-th scan point leaving ends the slack: k = max(this, points / 500)
   /// Mixed points at an edge: where a scanner's line runs off an edge it reads a little below
   /// the face, and those points are closer to the wall under the edge than to the face they lie
   /// on. Slack centring leaves out the points of a flat face (PlanarFaces group) that has fewer

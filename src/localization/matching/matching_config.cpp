@@ -106,6 +106,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("icp_slack_tolerance", c.icp_slack_tolerance);
   share("icp_slack_eigen_ratio", c.icp_slack_eigen_ratio);
   atLeast("icp_slack_steps", c.icp_slack_steps, 1);
+  atLeast("icp_slack_points", c.icp_slack_points, 1);
   c.closest_point_grid = m.getBool("closest_point_grid", c.closest_point_grid);
   c.icp_huber_floor = m.getDouble("icp_huber_floor", c.icp_huber_floor);
   if (!(c.icp_huber_floor >= 0)) m.fail("icp_huber_floor", "must be >= 0");

@@ -83,7 +83,8 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(A);
   const double top = eig.eigenvalues().maxCoeff();
   if (!(top > 0)) return total;
-  const size_t k = std::max<size_t>(2, rows.size() / 500);  // the k-th point leaving ends the slack
+  // the k-th point leaving ends the slack: a few stray points do not
+  const size_t k = std::max<size_t>(static_cast<size_t>(cfg.icp_slack_points), rows.size() / 500);
   for (int pass = 0; pass < 2; ++pass) {
     for (int e = 0; e < 6; ++e) {
       if (eig.eigenvalues()[e] > cfg.icp_slack_eigen_ratio * top) continue;
