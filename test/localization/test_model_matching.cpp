@@ -417,6 +417,29 @@ TEST(ModelMatchingRealData, ScaledDefaultsFindBunnyAndMilk) {
   }
 }
 
+namespace {
+
+/// A view without what lies within `loss` of a crease of the part (at `truth`): the scanner's
+/// loss at edges, the same at every edge.
+ScanCloud erodedAtCreases(const ScanCloud& view, const Eigen::Isometry3d& truth, const PlanarFaces& faces, double loss) {
+  ScanCloud out;
+  for (const auto& p : view.points) {
+    const Eigen::Vector3d q = truth.inverse() * p.cast<double>();
+    double d = 1;
+    for (const auto& g : faces.groups) {
+      for (const auto& [a, b] : g.creases) {
+        const Eigen::Vector3d e = b - a;
+        const double u = std::clamp((q - a).dot(e) / e.squaredNorm(), 0.0, 1.0);
+        d = std::min(d, (q - a - u * e).norm());
+      }
+    }
+    if (d > loss) out.append(p, 0.f);
+  }
+  return out;
+}
+
+}  // namespace
+
 // A scanner loses a little at every edge (segment ends, the last line before an edge), so a
 // flat top's scanned patch is smaller than the face and slides inside it; ICP stops where the
 // first points reach an edge. Centring in the slack puts the pose in the middle: with the same
@@ -435,19 +458,7 @@ TEST(ModelMatching, CentringInTheSlackUndoesEvenEdgeLoss) {
     for (int t = 0; t < 3; ++t) {
       const Eigen::Isometry3d truth = onTable(0.40 + 0.24 * U(rng), -0.09 + 0.18 * U(rng), 2 * M_PI * U(rng));
       const ScanCloud view = singleViewCloud(mesh, truth, kEye, 0.0005, 2e-5, rng());
-      ScanCloud eroded;  // without what lies within 1 mm of a crease
-      for (const auto& p : view.points) {
-        const Eigen::Vector3d q = truth.inverse() * p.cast<double>();
-        double d = 1;
-        for (const auto& g : faces.groups) {
-          for (const auto& [a, b] : g.creases) {
-            const Eigen::Vector3d e = b - a;
-            const double u = std::clamp((q - a).dot(e) / e.squaredNorm(), 0.0, 1.0);
-            d = std::min(d, (q - a - u * e).norm());
-          }
-        }
-        if (d > 0.001) eroded.append(p, 0.f);
-      }
+      const ScanCloud eroded = erodedAtCreases(view, truth, faces, 0.001);
       for (auto* m : {&centred, &pinned}) {
         const auto det = m->locate({eroded}, {part}, nullptr, nullptr, &table);
         ASSERT_EQ(det.size(), 1u) << part;
@@ -485,19 +496,7 @@ TEST(ModelMatching, MixedEdgePointsDoNotPinThePart) {
   for (int t = 0; t < 3; ++t) {
     const Eigen::Isometry3d truth = onTable(0.50 + 0.02 * t, 0.06, 0.3 * t);
     const ScanCloud view = singleViewCloud(mesh, truth, kEye, 0.0005, 2e-5, 40 + t);
-    ScanCloud scan;  // 1 mm lost at every crease, as in CentringInTheSlackUndoesEvenEdgeLoss
-    for (const auto& p : view.points) {
-      const Eigen::Vector3d q = truth.inverse() * p.cast<double>();
-      double d = 1;
-      for (const auto& g : faces.groups) {
-        for (const auto& [a, b] : g.creases) {
-          const Eigen::Vector3d e = b - a;
-          const double u = std::clamp((q - a).dot(e) / e.squaredNorm(), 0.0, 1.0);
-          d = std::min(d, (q - a - u * e).norm());
-        }
-      }
-      if (d > 0.001) scan.append(p, 0.f);
-    }
+    ScanCloud scan = erodedAtCreases(view, truth, faces, 0.001);
     for (double az = -100; az <= -80; az += 0.25) {  // the mixed arc (model frame, shaft axis at x = y = 0)
       const double r = 0.00885 + 0.0002 * (az + 100) / 20, a = az * M_PI / 180;
       scan.append((truth * Eigen::Vector3d(r * std::cos(a), r * std::sin(a), top - 0.0005)).cast<float>(), 0.f);
