@@ -21,7 +21,7 @@ taskset -c 0 "$TOOLS/cellsight_plan" cycles --root "$ROOT" --cycles 3 --true-pos
   --calibration "$WORK/calibration" --limit-max-mm 0.001 --limit-success 1 --json "$WORK/chain.json" ||
   { echo "FAIL: the planning chain on true poses with an exact robot (see $WORK/chain.json)"; exit 1; }
 taskset -c 0 "$TOOLS/cellsight_plan" cycles --root "$ROOT" --cycles 8 --calibration "$WORK/calibration" \
-  --limit-success 1 --limit-median-plan-ms 100 --limit-sigma-mm 0.6 --limit-sigma-deg 0.45 --json "$WORK/cycles.json" \
+  --limit-success 1 --limit-median-plan-ms 100 --limit-sigma-mm 0.4 --limit-sigma-deg 0.3 --json "$WORK/cycles.json" \
   --dump-scans "$WORK" ||
   { echo "FAIL: self-calibrated cycles (see $WORK/cycles.json)"; exit 1; }
 # the error budget's localisation rows: every located model's scatter, and the scans it came from
