@@ -68,4 +68,13 @@ std::map<std::string, Trajectory> loadTrajectories(const std::string& path) {
   return out;
 }
 
+Trajectory loadTrajectory(const std::string& path, const std::string& name) {
+  const auto all = loadTrajectories(path);
+  const auto it = all.find(name);
+  if (it != all.end()) return it->second;
+  std::string names;
+  for (const auto& kv : all) names += (names.empty() ? "" : ", ") + kv.first;
+  throw ConfigError(path + ": no trajectory '" + name + "' (the file has: " + names + ")");
+}
+
 }  // namespace cellsight

@@ -64,7 +64,7 @@ struct PlanningEvaluation::Impl {
   std::unique_ptr<ModelMatcher> matcher;
   ClusteringConfig clustering;
   ScannerSettings settings;
-  Trajectory sweep;
+  Trajectory sweep, refine_sweep;
   ScannerCalibration cal;
   std::unique_ptr<ScannerRenderer> renderer;
   std::unique_ptr<RobotErrorModel> robot, executor;
@@ -84,7 +84,9 @@ PlanningEvaluation::PlanningEvaluation(const PlanningEvalConfig& config) : impl_
   m.matcher->prepare({});
   m.clustering = loadClusteringConfig(root + "/config/clustering.yaml");
   m.settings = loadScannerSettings(root + "/config/scanner.yaml");
-  m.sweep = loadTrajectories(root + "/config/trajectories.yaml").at(config.trajectory);
+  m.sweep = loadTrajectory(root + "/config/trajectories.yaml", config.trajectory);
+  if (!config.refine_trajectory.empty())
+    m.refine_sweep = loadTrajectory(root + "/config/trajectories.yaml", config.refine_trajectory);
   m.cal = config.calibration.empty() ? ScannerCalibration::fromScene(m.scene) : ScannerCalibration::fromFolder(config.calibration);
   m.renderer = std::make_unique<ScannerRenderer>(std::make_shared<CellGeometry>(m.scene));
   m.robot = std::make_unique<RobotErrorModel>(m.scene.as_built.robot);
@@ -107,10 +109,13 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
   rep.seed = seed;
   // scan as the cell does: the robot as built moves, the scanner triangulates with `cal`
   double t0 = now();
-  ScanCloud cloud = simulateScan(*m.renderer, m.sweep.poses, m.cal, m.settings.line, m.settings.triangulation, seed,
-                                 nullptr, m.robot.get());
-  if (m.settings.has_workspace) cloud = cropBox(cloud, m.settings.workspace);
-  cloud = statisticalOutlierRemoval(cloud, m.settings.outlier_k, m.settings.outlier_std);
+  auto scan = [&](const Trajectory& t, uint64_t noise_seed) {
+    ScanCloud c = simulateScan(*m.renderer, t.poses, m.cal, m.settings.line, m.settings.triangulation, noise_seed,
+                               nullptr, m.robot.get());
+    if (m.settings.has_workspace) c = cropBox(c, m.settings.workspace);
+    return statisticalOutlierRemoval(c, m.settings.outlier_k, m.settings.outlier_std);
+  };
+  ScanCloud cloud = scan(m.sweep, seed);
   rep.scan_seconds = now() - t0;
   if (!m.config.dump_scans.empty()) saveCloud(m.config.dump_scans + "/scan_" + std::to_string(seed) + ".ply", cloud);
   rep.scan_points = cloud.size();
@@ -121,8 +126,26 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
   const Eigen::Vector3f eye = m.cal.T_base_camera.translation().cast<float>();
   const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
                                 static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
-  const auto found = m.matcher->locate(clusters, {}, nullptr, &eye, cr.plane_found ? &support : nullptr, &cr.support_points);
+  auto found = m.matcher->locate(clusters, {}, nullptr, &eye, cr.plane_found ? &support : nullptr, &cr.support_points);
   rep.locate_seconds = now() - t0;
+  if (!m.refine_sweep.poses.empty()) {
+    // the second pass: its own image noise (another seed space), its own robot moves
+    t0 = now();
+    const ScanCloud second = scan(m.refine_sweep, seed + 1000003);
+    rep.refine_scan_seconds = now() - t0;
+    t0 = now();
+    // both passes' points above the support (their clusters): each pass pins what the other
+    // leaves loose (the first runs along the edges the second crosses)
+    ScanCloud above;
+    for (const auto& c : clusterScene(second, m.clustering).clusters)
+      above.points.insert(above.points.end(), c.cloud.points.begin(), c.cloud.points.end());
+    for (const auto& c : clusters) above.points.insert(above.points.end(), c.points.begin(), c.points.end());
+    MatchStats st;
+    found = m.matcher->refine(above, found, &st, &eye, cr.plane_found ? &support : nullptr);
+    rep.refine_seconds = now() - t0;
+    for (const auto& d : found) rep.refined += d.refined ? 1 : 0;
+    rep.refine_warnings = st.warnings;
+  }
   rep.located = found.size();
   std::vector<LocatedPart> parts;
   std::map<std::string, int> count;

@@ -76,6 +76,7 @@ struct Options {
   std::vector<std::string> parts;
   std::vector<double> ratios;
   std::string detections, cloud, calibration;
+  std::string trajectory = "demo_sweep";  ///< cells: the scan's trajectory (config/trajectories.yaml)
   double limit_rms_mm = 0, limit_t_mm = 0, limit_r_deg = 0, limit_recall = 0;  ///< cells: 0 = no limit
   std::string dump_clusters;  ///< cells, cloud: write each scene's clusters as PLY here
   /// `value`, or `<root>/<relative>` when not given
@@ -441,7 +442,7 @@ int runCloud(const Options& o) {
   return counts.fn == 0 && counts.fp == 0 ? 0 : 3;
 }
 
-/// Random cells (eval/scene_generator) scanned in-process with the demo sweep and the nodes' crop
+/// Random cells (eval/scene_generator) scanned in-process (the demo sweep unless told) and the nodes' crop
 /// and outlier filter, clustered and located: detection P/R/F1 and errors over the seeds.
 int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::string& out_dir) {
   const std::string models = o.orRoot(o.models, "config/models"), base = o.orRoot(o.scene, "config/scenes/demo.yaml");
@@ -449,13 +450,14 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   const MatchingConfig cfg = loadMatchingConfig(o.orRoot(o.matching, "config/matching.yaml"));
   const ClusteringConfig ccfg = loadClusteringConfig(o.root + "/config/clustering.yaml");
   const ScannerSettings settings = loadScannerSettings(o.root + "/config/scanner.yaml");
-  const Trajectory sweep = loadTrajectories(o.root + "/config/trajectories.yaml").at("demo_sweep");
+  const Trajectory sweep = loadTrajectory(o.root + "/config/trajectories.yaml", o.trajectory);
   ModelMatcher matcher(lib, cfg);
   matcher.prepare({});
   DetectionCounts total;
   std::vector<double> terr, rerr, rms;
   const bool own_calibration = !o.calibration.empty();
   json out = {{"calibration", own_calibration ? o.calibration : "the simulator's true calibration"},
+              {"trajectory", o.trajectory},
               {"success", {{"max_t_mm", o.max_t_mm}, {"max_r_deg", o.max_r_deg}}},
               {"seeds", json::array()}};
   for (const uint64_t seed : seeds) {
@@ -621,6 +623,8 @@ int main(int argc, char** argv) {
   c_cells->add_option("--matching", cells.matching, "matching settings YAML [default: <root>/config/matching.yaml]")
       ->check(CLI::ExistingFile);
   c_cells->add_option("--seeds", cell_seeds, "scene seeds");
+  c_cells->add_option("--trajectory", cells.trajectory, "the scan's trajectory (config/trajectories.yaml)")
+      ->capture_default_str();
   c_cells->add_option("--dump-clusters", cells.dump_clusters, "write every scene's clusters as PLY into this folder");
   c_cells->add_option("--seeds-file", seeds_file, "a seeds file, e.g. config/heldout_seeds.yaml")->check(CLI::ExistingFile);
   c_cells->add_option("--out", cells_out, "where the generated scenes go")->capture_default_str();

@@ -41,7 +41,7 @@ struct CyclesOptions {
   long first_seed = 1;
   double limit_sigma_mm = 0, limit_sigma_deg = 0, limit_median_plan_ms = 0, limit_success = 0, limit_max_mm = 0;
   bool exact_robot = false, true_poses = false;
-  std::string trajectory = "demo_sweep", dump_scans;
+  std::string trajectory = "demo_sweep", refine_trajectory = "cross_sweep", dump_scans;
 };
 
 int runCycles(const CyclesOptions& o) {
@@ -51,12 +51,14 @@ int runCycles(const CyclesOptions& o) {
   cfg.calibration = o.calibration;
   cfg.exact_robot = o.exact_robot;
   cfg.trajectory = o.trajectory;
+  cfg.refine_trajectory = o.refine_trajectory == "none" ? "" : o.refine_trajectory;
   cfg.true_poses = o.true_poses;
   cfg.dump_scans = o.dump_scans;
   PlanningEvaluation ev(cfg);
   json out = {{"scene", o.scene},
               {"exact_robot", o.exact_robot},
               {"trajectory", o.trajectory},
+              {"refine_trajectory", cfg.refine_trajectory},
               {"true_poses", o.true_poses},
               {"calibration", o.calibration.empty() ? "the simulator's true calibration (not the system's figure)" : o.calibration},
               {"cycles", json::array()}};
@@ -69,7 +71,9 @@ int runCycles(const CyclesOptions& o) {
     const CycleReport r = ev.run(seed);
     json cj = {{"seed", seed},           {"scan_points", r.scan_points},     {"located", r.located},
                {"voxels", r.voxels},     {"scan_seconds", r.scan_seconds},   {"locate_seconds", r.locate_seconds},
-               {"world_seconds", r.world_seconds}, {"plan_seconds", r.plan_seconds}, {"placements", json::array()}};
+               {"world_seconds", r.world_seconds}, {"plan_seconds", r.plan_seconds}, {"placements", json::array()},
+               {"refine_scan_seconds", r.refine_scan_seconds}, {"refine_seconds", r.refine_seconds},
+               {"refined", r.refined}, {"refine_warnings", r.refine_warnings}};
     cj["locate_errors"] = json::object();
     for (const auto& [name, e] : r.locate_errors) {
       cj["locate_errors"][name] = {{"t_err_mm", e.t_err_mm},
@@ -102,9 +106,14 @@ int runCycles(const CyclesOptions& o) {
       cj["placements"].push_back(pj);
     }
     out["cycles"].push_back(cj);
-    std::printf("cycle %d (seed %llu): %zu located, %d placed of %zu, scan %.1f s, locate %.2f s, plan %.0f ms\n", c + 1,
+    std::printf("cycle %d (seed %llu): %zu located, %d placed of %zu, scan %.1f s, locate %.2f s, plan %.0f ms", c + 1,
                 static_cast<unsigned long long>(seed), r.located, ok, r.placements.size(), r.scan_seconds,
                 r.locate_seconds, r.plan_seconds * 1e3);
+    if (!cfg.refine_trajectory.empty())
+      std::printf(", second scan %.1f s, %zu of %zu refined in %.2f s", r.refine_scan_seconds, r.refined, r.located,
+                  r.refine_seconds);
+    std::printf("\n");
+    for (const auto& w : r.refine_warnings) std::printf("  refine: %s\n", w.c_str());
     std::fflush(stdout);
   }
   // per-axis sample standard deviations (and the mean) of a model's vectors over the cycles
@@ -345,6 +354,9 @@ int main(int argc, char** argv) {
   cycles->add_option("--dump-scans", co.dump_scans, "write every cycle's finished scan here (scan_<seed>.ply)")
       ->check(CLI::ExistingDirectory);
   cycles->add_option("--trajectory", co.trajectory, "the scan's trajectory (config/trajectories.yaml)")->capture_default_str();
+  cycles->add_option("--refine-trajectory", co.refine_trajectory,
+                     "a second pass along this trajectory refines the located parts on both scans (none: one pass)")
+      ->capture_default_str();
   cycles->add_option("--limit-sigma-mm", co.limit_sigma_mm, "exit 3 when a placement sigma exceeds this (mm)")
       ->check(cellsight_tools::nonNegative());
   cycles->add_option("--limit-sigma-deg", co.limit_sigma_deg, "exit 3 when a rotation sigma exceeds this (deg)")

@@ -127,3 +127,17 @@ TEST(Trajectory, AbsurdStepCountsAreRefusedWithTheLimit) {
     EXPECT_NE(std::string(e.what()).find("2 to 100000 steps"), std::string::npos) << e.what();
   }
 }
+
+// A trajectory asked for by name: found, or a ConfigError that lists what the file has.
+TEST(Trajectory, UnknownNameListsTheFilesTrajectories) {
+  const std::string file = cellsight_test::tempDir() + "/t.yaml";
+  std::ofstream(file) << "trajectories:\n  one: {type: linear, steps: 3, start: {xyz: [0.5, 0, 0.3], rpy: [3.14159, 0, 0]},"
+                         " end: {xyz: [0.5, 0.1, 0.3], rpy: [3.14159, 0, 0]}}\n";
+  EXPECT_EQ(cellsight::loadTrajectory(file, "one").poses.size(), 3u);
+  try {
+    cellsight::loadTrajectory(file, "two");
+    FAIL() << "an unknown trajectory was answered";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("no trajectory 'two' (the file has: one)"), std::string::npos) << e.what();
+  }
+}

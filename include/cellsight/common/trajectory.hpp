@@ -23,6 +23,9 @@ struct Trajectory {
 ///  poses:    poses (list of poses).
 std::map<std::string, Trajectory> loadTrajectories(const std::string& path);
 
+/// One trajectory of a file; throws ConfigError naming the file's trajectories when it has no `name`.
+Trajectory loadTrajectory(const std::string& path, const std::string& name);
+
 /// Linear interpolation between two poses (slerp for the rotation), `steps` ≥ 2 poses.
 Trajectory linearTrajectory(const Eigen::Isometry3d& start, const Eigen::Isometry3d& end, int steps);
 

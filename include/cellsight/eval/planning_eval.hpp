@@ -20,6 +20,8 @@ struct PlanningEvalConfig {
   std::string scene = "config/scenes/demo.yaml"; ///< relative to root unless absolute
   std::string calibration;                       ///< calibration folder; empty: the simulator's truth
   std::string trajectory = "demo_sweep";
+  /// a second scan along this trajectory refines the located parts (ModelMatcher::refine; empty: none)
+  std::string refine_trajectory;
   std::string dump_scans;  ///< write every cycle's finished scan here as scan_<seed>.ply (empty: none)
   MotionPlannerConfig motion;
   GripperConfig gripper;
@@ -52,6 +54,9 @@ struct CycleReport {
   uint64_t seed = 0;
   size_t scan_points = 0, located = 0;
   double scan_seconds = 0, locate_seconds = 0, plan_seconds = 0, world_seconds = 0;
+  double refine_scan_seconds = 0, refine_seconds = 0;  ///< the second scan and the refinement (0: none)
+  size_t refined = 0;                                  ///< parts the second scan moved
+  std::vector<std::string> refine_warnings;
   size_t voxels = 0;
   std::vector<PlacementResult> placements;
   /// each located part against its truth, by instance name (scoring only)

@@ -94,6 +94,12 @@ struct MatchingConfig {
   /// saw, which would otherwise end the slack wherever the polish stopped. 0 band: off.
   double icp_edge_band = 0.001;  ///< m
   int icp_edge_support = 3;
+  /// refine() on a second scan: a part takes the scan's points within refine_radius of its model
+  /// (and nearer it than any other part's); with fewer than refine_min_points, or when the
+  /// refined pose moves a model point more than refine_max_shift, it keeps its pose.
+  double refine_radius = 0.003;     ///< m
+  int refine_min_points = 200;
+  double refine_max_shift = 0.002;  ///< m
   /// The polish's closest points from a grid of candidate triangles per cell (ClosestPointGrid,
   /// exact; meshes up to 5 000 faces) instead of Embree's BVH point query for every point
   /// (false: the library path, kept for comparison). Same answers, measured faster on the part
@@ -147,6 +153,7 @@ struct PartDetection {
   int cluster = -1;      ///< index of the input cluster
   int iterations = 0;    ///< RANSAC hypotheses drawn
   std::string matcher;   ///< the coarse stage: "ppf", "ransac" or "fgr"
+  bool refined = false;  ///< refine() moved it to its pose on a second scan
   double coarse_seconds = 0, refine_seconds = 0;  ///< CPU time of the stages for this pair
 };
 
@@ -219,6 +226,20 @@ class ModelMatcher {
                                 MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
                                 const Eigen::Vector4f* support_plane = nullptr,
                                 const std::vector<Eigen::Vector3f>* support_points = nullptr) const;
+
+  /// Refines located parts (poses as locate() gives them) on another scan of the same cell, its
+  /// points above the support (e.g. the clusters of clusterScene, joined): a second pass, e.g.
+  /// at right angles to the first, whose lines cross the edges the first ran along. Each part
+  /// takes the scan's points within refine_radius of its model and nearer it than any other
+  /// part's, and is polished and centred in its slack from its pose as locate() finishes a
+  /// detection. A part with fewer than refine_min_points there, whose refined pose is not
+  /// accepted, or that would move a model point more than refine_max_shift (its symmetry taken
+  /// out) keeps its pose, and a
+  /// warning in `stats` says why. Returns `parts` in order (`refined` set where moved).
+  /// `viewpoint`, `support_plane`: as for locate(). Unknown model ids throw std::out_of_range.
+  std::vector<PartDetection> refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,
+                                    MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
+                                    const Eigen::Vector4f* support_plane = nullptr) const;
 
   /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
   /// first locate(); unknown ids throw std::out_of_range.

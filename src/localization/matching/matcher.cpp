@@ -16,6 +16,35 @@ namespace {
 /// Flat faces smaller than this are not laid onto planar clusters: 25 coarse cells.
 float patchMinArea(const MatchingConfig& cfg) { return static_cast<float>(25 * cfg.voxel * cfg.voxel); }
 
+/// ICP from T0 (polished with exact neighbours when `polish`), scored into *c (a copy of `d`
+/// with the pose and its figures); a polished pose good enough to report goes to the middle of
+/// its slack, kept if it still is. False when the ICP diverged or the pose is off the support.
+bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                const Eigen::Vector4f* support, const PartDetection& d, const Eigen::Isometry3f& T0, size_t points,
+                bool polish, PartDetection* c) {
+  Refined r = icp(s, m, T0, cfg, points, polish);
+  if (!r.T.matrix().allFinite()) return false;
+  if (support && offSupport(m, r.T, *support, cfg)) return false;
+  auto score = [&](const Eigen::Isometry3f& T, PartDetection* out) {
+    *out = d;
+    out->pose = T.cast<double>();
+    out->rmse = r.rmse;
+    out->coverage = coverage(s, m, T, cfg.fitness_radius);
+    out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
+    out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
+  };
+  score(r.T, c);
+  if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {
+    const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, r.polished_fresh, cfg).inverse()).cast<float>();
+    PartDetection centred;
+    if (T.matrix().allFinite() && !(support && offSupport(m, T, *support, cfg))) {
+      score(T, &centred);
+      if (accepted(centred, cfg)) *c = centred;
+    }
+  }
+  return true;
+}
+
 PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                     const Eigen::Vector4f* support, uint64_t seed) {
   PartDetection d;
@@ -86,28 +115,7 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   // Every candidate is refined on a thinned scene (distance-field neighbours only) and scored;
   // the best one is then refined on all the ICP points and polished with exact neighbours.
   auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, PartDetection* c) {
-    Refined r = icp(s, m, T0, cfg, points, polish);
-    if (!r.T.matrix().allFinite()) return false;
-    if (support && offSupport(m, r.T, *support, cfg)) return false;
-    auto score = [&](const Eigen::Isometry3f& T, PartDetection* out) {
-      *out = d;
-      out->pose = T.cast<double>();
-      out->rmse = r.rmse;
-      out->coverage = coverage(s, m, T, cfg.fitness_radius);
-      out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
-      out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
-    };
-    score(r.T, c);
-    // a polished pose good enough to report goes to the middle of its slack (kept if it still is)
-    if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {
-      const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, r.polished_fresh, cfg).inverse()).cast<float>();
-      PartDetection centred;
-      if (T.matrix().allFinite() && !(support && offSupport(m, T, *support, cfg))) {
-        score(T, &centred);
-        if (accepted(centred, cfg)) *c = centred;
-      }
-    }
-    return true;
+    return finishPose(s, m, cfg, support, d, T0, points, polish, c);
   };
   const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
   const size_t screen_points = std::min(all_points, static_cast<size_t>(std::max(100.0, cfg.icp_screen_points)));
@@ -463,6 +471,102 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       }
     }
     round = std::move(next);
+  }
+  st.seconds = seconds(t0);
+  return out;
+}
+
+std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,
+                                               MatchStats* stats, const Eigen::Vector3f* viewpoint,
+                                               const Eigen::Vector4f* support_plane) const {
+  const auto t0 = Clock::now();
+  MatchingConfig cfg = config_;
+  if (viewpoint) cfg.viewpoint = *viewpoint;
+  MatchStats local;
+  MatchStats& st = stats ? *stats : local;
+  st = MatchStats();
+  std::vector<std::shared_ptr<const ModelIndex>> idx(parts.size());
+  for (size_t i = 0; i < parts.size(); ++i) library_->model(parts[i].model);  // unknown id: throws first
+  parallelFor(parts.size(), cfg.threads, [&](size_t i) { idx[i] = index(parts[i].model); });
+  const float radius = static_cast<float>(cfg.refine_radius);
+  // a model point's distance to the model at T (inverse given), within the radius
+  auto distanceTo = [&](size_t i, const Eigen::Isometry3f& Ti, const Vec3& p) {
+    const ModelIndex& m = *idx[i];
+    const Vec3 q = Ti * p;
+    if (m.has_mesh) {
+      const ClosestPoint c = meshClosest(m, q, radius);
+      return c.found ? (q - c.point).norm() : std::numeric_limits<float>::infinity();
+    }
+    const int j = m.field.lookup(q);
+    const float d = j < 0 ? std::numeric_limits<float>::infinity() : (q - m.fine->points[j]).norm();
+    return d <= radius ? d : std::numeric_limits<float>::infinity();
+  };
+  std::vector<Eigen::Isometry3f> Tinv(parts.size());
+  std::vector<Vec3> centre(parts.size());
+  std::vector<float> reach(parts.size());
+  for (size_t i = 0; i < parts.size(); ++i) {
+    const Eigen::Isometry3f T = parts[i].pose.cast<float>();
+    Tinv[i] = T.inverse();
+    centre[i] = T * idx[i]->centroid.cast<float>();
+    reach[i] = idx[i]->diameter + radius;  // the centroid lies inside, so no point of the part is farther
+  }
+  // each scan point goes to the nearest part within the radius
+  std::vector<int> owner(scan.points.size(), -1);
+  parallelFor(scan.points.size(), cfg.threads, [&](size_t k) {
+    const Vec3& p = scan.points[k];
+    if (!p.allFinite()) return;
+    float best = std::numeric_limits<float>::infinity();
+    for (size_t i = 0; i < parts.size(); ++i) {
+      if ((p - centre[i]).norm() > reach[i]) continue;
+      const float d = distanceTo(i, Tinv[i], p);
+      if (d < best) {
+        best = d;
+        owner[k] = static_cast<int>(i);
+      }
+    }
+  });
+  std::vector<std::vector<Vec3>> points(parts.size());
+  for (size_t k = 0; k < scan.points.size(); ++k) {
+    if (owner[k] >= 0) points[static_cast<size_t>(owner[k])].push_back(scan.points[k]);
+  }
+  std::vector<PartDetection> out = parts;
+  std::vector<std::string> why(parts.size());
+  parallelFor(parts.size(), cfg.threads, [&](size_t i) {
+    const ModelIndex& m = *idx[i];
+    const std::string name = "part " + std::to_string(i) + " (" + parts[i].model + ")";
+    if (static_cast<int>(points[i].size()) < cfg.refine_min_points) {
+      why[i] = name + ": " + std::to_string(points[i].size()) + " points of the second scan within refine_radius, below refine_min_points " +
+               std::to_string(cfg.refine_min_points) + ": pose kept";
+      return;
+    }
+    const auto t = Clock::now();
+    const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
+    if (points[i].size() > cap) points[i] = capPoints(points[i], cfg.icp_spacing, cap);
+    const std::unique_ptr<SceneData> sd = prepareScene(points[i], cfg);
+    const Eigen::Isometry3f T0 = parts[i].pose.cast<float>();
+    PartDetection d = parts[i], r;
+    const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
+    if (!finishPose(*sd, m, cfg, support_plane, d, T0, all_points, true, &r) || !accepted(r, cfg)) {
+      why[i] = name + ": the second scan's pose failed validation (fitness " + std::to_string(r.fitness) + ", coverage " +
+               std::to_string(r.coverage) + ", rmse " + std::to_string(r.rmse * 1e3) + " mm, see-through " +
+               std::to_string(r.see_through) + "): pose kept";
+      return;
+    }
+    // how far a model point moves, the part's symmetry taken out: its centroid's move plus the
+    // turn's arc at the part's radius
+    const PoseError e = poseError(m.info, m.centroid, r.pose, parts[i].pose);
+    const double shift = e.translation + e.rotation * 0.5 * m.diameter;
+    if (shift > cfg.refine_max_shift) {
+      why[i] = name + ": the second scan moves it " + std::to_string(shift * 1e3) + " mm, above refine_max_shift: pose kept";
+      return;
+    }
+    r.pose = canonicalPose(m.info, m.centroid, r.pose);
+    r.refined = true;
+    r.refine_seconds = parts[i].refine_seconds + seconds(t);
+    out[i] = r;
+  });
+  for (const auto& w : why) {
+    if (!w.empty()) st.warnings.push_back(w);
   }
   st.seconds = seconds(t0);
   return out;

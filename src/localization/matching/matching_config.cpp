@@ -101,6 +101,9 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.icp_edge_band = m.getDouble("icp_edge_band", c.icp_edge_band);
   if (!(c.icp_edge_band >= 0)) m.fail("icp_edge_band", "must be >= 0 (0: off)");
   atLeast("icp_edge_support", c.icp_edge_support, 1);
+  positive("refine_radius", c.refine_radius);
+  atLeast("refine_min_points", c.refine_min_points, 20);
+  positive("refine_max_shift", c.refine_max_shift);
   c.icp_centre_slack = m.getBool("icp_centre_slack", c.icp_centre_slack);
   positive("icp_slack_range", c.icp_slack_range);
   positive("icp_slack_tolerance", c.icp_slack_tolerance);
