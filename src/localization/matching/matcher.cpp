@@ -16,6 +16,14 @@ namespace {
 /// Flat faces smaller than this are not laid onto planar clusters: 25 coarse cells.
 float patchMinArea(const MatchingConfig& cfg) { return static_cast<float>(25 * cfg.voxel * cfg.voxel); }
 
+/// The settings of one locate() or refine() call (its viewpoint, when given), its statistics cleared.
+MatchingConfig callSettings(const MatchingConfig& config, const Eigen::Vector3f* viewpoint, MatchStats& st) {
+  MatchingConfig cfg = config;
+  if (viewpoint) cfg.viewpoint = *viewpoint;
+  st = MatchStats();
+  return cfg;
+}
+
 /// ICP from T0 (polished with exact neighbours when `polish`), scored into *c (a copy of `d`
 /// with the pose and its figures); a polished pose good enough to report goes to the middle of
 /// its slack, kept if it still is. False when the ICP diverged or the pose is off the support.
@@ -325,11 +333,9 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
                                             const Eigen::Vector3f* viewpoint, const Eigen::Vector4f* support_plane,
                                             const std::vector<Eigen::Vector3f>* support_points) const {
   const auto t0 = Clock::now();
-  MatchingConfig cfg = config_;
-  if (viewpoint) cfg.viewpoint = *viewpoint;
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
-  st = MatchStats();
+  const MatchingConfig cfg = callSettings(config_, viewpoint, st);
   if (!fallback_warning_.empty()) st.warnings.push_back(fallback_warning_);
   std::vector<std::string> models = models_in.empty() ? library_->ids() : models_in;
   for (const auto& id : models) library_->model(id);  // unknown id: throws before any work
@@ -480,11 +486,9 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
                                                MatchStats* stats, const Eigen::Vector3f* viewpoint,
                                                const Eigen::Vector4f* support_plane) const {
   const auto t0 = Clock::now();
-  MatchingConfig cfg = config_;
-  if (viewpoint) cfg.viewpoint = *viewpoint;
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
-  st = MatchStats();
+  const MatchingConfig cfg = callSettings(config_, viewpoint, st);
   std::vector<std::shared_ptr<const ModelIndex>> idx(parts.size());
   for (size_t i = 0; i < parts.size(); ++i) library_->model(parts[i].model);  // unknown id: throws first
   parallelFor(parts.size(), cfg.threads, [&](size_t i) { idx[i] = index(parts[i].model); });
