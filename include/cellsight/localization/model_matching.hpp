@@ -234,8 +234,8 @@ class ModelMatcher {
   /// part's, and is polished and centred in its slack from its pose as locate() finishes a
   /// detection. A part with fewer than refine_min_points there, whose refined pose is not
   /// accepted, or that would move a model point more than refine_max_shift (its symmetry taken
-  /// out) keeps its pose, and a
-  /// warning in `stats` says why. Returns `parts` in order (`refined` set where moved).
+  /// out) keeps its pose, and a warning in `stats` says why. Returns `parts` in order (`refined`
+  /// set where moved).
   /// `viewpoint`, `support_plane`: as for locate(). Unknown model ids throw std::out_of_range.
   std::vector<PartDetection> refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,
                                     MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,

@@ -493,7 +493,7 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
   for (size_t i = 0; i < parts.size(); ++i) library_->model(parts[i].model);  // unknown id: throws first
   parallelFor(parts.size(), cfg.threads, [&](size_t i) { idx[i] = index(parts[i].model); });
   const float radius = static_cast<float>(cfg.refine_radius);
-  // a model point's distance to the model at T (inverse given), within the radius
+  // a scan point's distance to part i's model (Ti: the inverse of its pose); infinite beyond the radius
   auto distanceTo = [&](size_t i, const Eigen::Isometry3f& Ti, const Vec3& p) {
     const ModelIndex& m = *idx[i];
     const Vec3 q = Ti * p;
@@ -548,9 +548,9 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
     if (points[i].size() > cap) points[i] = capPoints(points[i], cfg.icp_spacing, cap);
     const std::unique_ptr<SceneData> sd = prepareScene(points[i], cfg);
     const Eigen::Isometry3f T0 = parts[i].pose.cast<float>();
-    PartDetection d = parts[i], r;
+    PartDetection r;
     const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
-    if (!finishPose(*sd, m, cfg, support_plane, d, T0, all_points, true, &r) || !accepted(r, cfg)) {
+    if (!finishPose(*sd, m, cfg, support_plane, parts[i], T0, all_points, true, &r) || !accepted(r, cfg)) {
       why[i] = name + ": the second scan's pose failed validation (fitness " + std::to_string(r.fitness) + ", coverage " +
                std::to_string(r.coverage) + ", rmse " + std::to_string(r.rmse * 1e3) + " mm, see-through " +
                std::to_string(r.see_through) + "): pose kept";
