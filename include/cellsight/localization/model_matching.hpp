@@ -63,7 +63,7 @@ struct MatchingConfig {
   double edge_similarity = 0.9;    ///< pre-rejection: edge length ratio scene/model
   double normal_tolerance = 0.5;   ///< rad, pre-rejection normal consistency
   double inlier_distance = 0.003;  ///< m, coarse inlier threshold (≈ 1.5 voxel)
-  int refine_candidates = 3;       ///< distinct coarse hypotheses refined by ICP per model
+  int refine_candidates = 6;       ///< distinct coarse hypotheses refined by ICP per model
   double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
   int icp_iterations = 40;
   double icp_max_points = 4000;    ///< scene points used by the final ICP (thinned evenly above this)

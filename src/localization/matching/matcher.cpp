@@ -119,7 +119,6 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   }
   d.coarse_seconds = seconds(t_coarse);
   const auto t_refine = Clock::now();
-  double best = -1;
   // Every candidate is refined on a thinned scene (distance-field neighbours only) and scored;
   // the best one is then refined on all the ICP points and polished with exact neighbours.
   auto evaluate = [&](const Eigen::Isometry3f& T0, size_t points, bool polish, PartDetection* c) {
@@ -127,21 +126,21 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   };
   const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
   const size_t screen_points = std::min(all_points, static_cast<size_t>(std::max(100.0, cfg.icp_screen_points)));
-  PartDetection chosen = d;
+  std::vector<PartDetection> screened;
   for (const auto& h : candidates) {
     if (!h.T.matrix().allFinite()) continue;
     PartDetection c;
-    if (evaluate(h.T, screen_points, false, &c) && c.score > best) {
-      best = c.score;
-      chosen = c;
-    }
+    if (evaluate(h.T, screen_points, false, &c)) screened.push_back(c);
   }
-  PartDetection fine;
-  if (best < 0) {
-    fine = d;
-  } else if (!evaluate(chosen.pose.cast<float>(), all_points, true, &fine)) {
-    fine = chosen;
+  // the polish moves a pose by a fraction of a millimetre and does not change where the camera
+  // saw the table: a pose it saw through ranks after every pose it did not
+  auto clear = [&](const PartDetection& c) { return c.see_through <= cfg.max_see_through; };
+  const PartDetection* chosen = nullptr;
+  for (const auto& c : screened) {
+    if (!chosen || (clear(c) && !clear(*chosen)) || (clear(c) == clear(*chosen) && c.score > chosen->score)) chosen = &c;
   }
+  PartDetection fine = d;
+  if (chosen && !evaluate(chosen->pose.cast<float>(), all_points, true, &fine)) fine = *chosen;
   fine.refine_seconds = seconds(t_refine);
   return fine;
 }

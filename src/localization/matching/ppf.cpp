@@ -8,6 +8,9 @@
 namespace cellsight::matching_detail {
 namespace {
 
+/// Cluster points of the short ICP that brings a laid face in before it is scored.
+constexpr size_t kPlanarIcpPoints = 200;
+
 /// atan2 to within 2e-6 rad of std::atan2 (measured over 300 000 angles; a minimax polynomial on
 /// [0, 1] and octant folding): PPF angles are binned in 12° steps, so libm's exactness only
 /// costs time in the voting loop.
@@ -227,7 +230,14 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   if (votes.size() > static_cast<size_t>(cfg.ppf_candidates)) votes.resize(cfg.ppf_candidates);
   // a cluster that is mostly one flat patch: its pairs' features were left out of the table (flat-face
   // buckets); its faces are laid onto the patch instead, ranked with the votes
-  for (const Hypothesis& h : planarHypotheses(s, m, 6)) votes.push_back(h);
+  for (Hypothesis h : planarHypotheses(s, m, 6)) {
+    // laid centroid on centroid, a face is a few millimetres off when the view holds only part
+    // of it, and then explains far fewer points than a wrong face that happens to be centred (a
+    // bracket on its side: 5 mm strips); a short ICP on a few points brings it in first
+    const Refined r = icp(s, m, h.T, cfg, kPlanarIcpPoints, false);
+    if (r.T.matrix().allFinite()) h.T = r.T;
+    votes.push_back(h);
+  }
   // scene points in a random (fixed) order: a pose whose first `probe` points explain less
   // than half the best pose's share so far stops there (its score extrapolated)
   std::vector<int> order(s.coarse.size());
@@ -247,7 +257,6 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   for (auto& v : votes) {
     if (support && offSupport(m, v.T, *support, cfg, slack)) continue;
     v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), probe, 0.5 * best_score / static_cast<double>(order.size()));
-    best_score = std::max(best_score, v.score);
     bool merged = false;
     for (auto& h : top) {
       if (!distinct(h.T, v.T, static_cast<float>(2 * cfg.inlier_distance))) {

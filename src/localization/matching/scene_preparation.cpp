@@ -56,21 +56,49 @@ ScanCloud thinned(const ScanCloud& c, double cell) {
   return out;
 }
 
-/// The plane of a cluster that is mostly one flat patch: a PCA plane, refitted to the points
-/// within half the inlier distance; found when they are at least 60 % of the points (the rest:
-/// a touching part, a rim).
+/// The largest flat patch of a cluster: the plane through a coarse point along its normal that
+/// most points lie on (within half the inlier distance, normals within 25°), refitted by PCA to
+/// those points; found when they are at least 60 % of the points. A part seen mostly by
+/// one face has it (the rest: a touching part, a rim), and so has one seen by a large face and a
+/// few others whose pairs the PPF table cannot tell apart (a bracket on its side: its L face).
 ScenePlane scenePlane(const ScanCloud& coarse, const MatchingConfig& cfg) {
   ScenePlane out;
-  if (coarse.size() < 10) return out;
+  const size_t n_pts = coarse.size();
+  if (n_pts < 10 || coarse.normals.size() != n_pts) return out;
   const float band = static_cast<float>(0.5 * cfg.inlier_distance);
-  std::vector<char> in(coarse.size(), 1);
-  Vec3 n = Vec3::UnitZ(), c = Vec3::Zero();
+  const float cos_n = std::cos(25.f * static_cast<float>(M_PI) / 180.f);
+  auto inliers = [&](const Vec3& n, const Vec3& c, bool check_normals, std::vector<char>* in) {
+    size_t count = 0;
+    for (size_t i = 0; i < n_pts; ++i) {
+      const bool ok = std::abs(n.dot(coarse.points[i] - c)) <= band &&
+                      (!check_normals || std::abs(n.dot(coarse.normals[i])) >= cos_n);
+      if (in) (*in)[i] = ok;
+      count += ok;
+    }
+    return count;
+  };
+  // candidate planes: every point's own tangent plane, at most 128 of them spread over the cluster
+  const size_t step = std::max<size_t>(1, n_pts / 128);
+  size_t best = 0, best_i = 0;
+  for (size_t i = 0; i < n_pts; i += step) {
+    const Vec3& n = coarse.normals[i];
+    if (!n.allFinite() || n.squaredNorm() < 0.5f) continue;
+    const size_t c = inliers(n, coarse.points[i], true, nullptr);
+    if (c > best) {
+      best = c;
+      best_i = i;
+    }
+  }
+  if (best < 10) return out;
+  std::vector<char> in(n_pts, 0);
+  inliers(coarse.normals[best_i], coarse.points[best_i], true, &in);
+  Vec3 n = coarse.normals[best_i], c = Vec3::Zero();
   Eigen::Matrix3f cov;
   size_t count = 0;
   for (int pass = 0; pass < 2; ++pass) {
     c.setZero();
     count = 0;
-    for (size_t i = 0; i < coarse.size(); ++i)
+    for (size_t i = 0; i < n_pts; ++i)
       if (in[i]) {
         c += coarse.points[i];
         ++count;
@@ -78,14 +106,14 @@ ScenePlane scenePlane(const ScanCloud& coarse, const MatchingConfig& cfg) {
     if (count < 10) return out;
     c /= static_cast<float>(count);
     cov.setZero();
-    for (size_t i = 0; i < coarse.size(); ++i)
+    for (size_t i = 0; i < n_pts; ++i)
       if (in[i]) cov += (coarse.points[i] - c) * (coarse.points[i] - c).transpose();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
     n = es.eigenvectors().col(0);
-    for (size_t i = 0; i < coarse.size(); ++i) in[i] = std::abs(n.dot(coarse.points[i] - c)) <= band;
+    if (pass == 0) inliers(n, c, true, &in);
   }
-  count = static_cast<size_t>(std::count(in.begin(), in.end(), 1));
-  if (count < 0.6 * coarse.size()) return out;
+  const double share = static_cast<double>(count) / static_cast<double>(n_pts);
+  if (share < 0.6) return out;
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
   out.found = true;
   out.n = n.dot(cfg.viewpoint - c) < 0 ? -n : n;
