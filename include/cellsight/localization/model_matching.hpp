@@ -106,7 +106,7 @@ struct MatchingConfig {
   /// meshes (docs/localization.md).
   bool closest_point_grid = true;
   double fitness_radius = 0.002;   ///< m, r_F
-  double min_fitness = 0.35;       ///< share of the model's visible points matched (laser shadows hide some)
+  double min_fitness = 0.30;       ///< share of the model's visible points matched (laser shadows hide some)
   double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)
   double max_rmse = 0.0015;        ///< m, point-to-plane RMS of the inliers
   bool check_visibility = true;    ///< fitness over points the viewpoint can see

@@ -13,6 +13,9 @@ namespace cellsight {
 namespace matching_detail {
 namespace {
 
+/// Screened candidates polished per (cluster, model) pair.
+constexpr size_t kPolished = 2;
+
 /// Flat faces smaller than this are not laid onto planar clusters: 25 coarse cells.
 float patchMinArea(const MatchingConfig& cfg) { return static_cast<float>(25 * cfg.voxel * cfg.voxel); }
 
@@ -135,12 +138,20 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   // the polish moves a pose by a fraction of a millimetre and does not change where the camera
   // saw the table: a pose it saw through ranks after every pose it did not
   auto clear = [&](const PartDetection& c) { return c.see_through <= cfg.max_see_through; };
-  const PartDetection* chosen = nullptr;
-  for (const auto& c : screened) {
-    if (!chosen || (clear(c) && !clear(*chosen)) || (clear(c) == clear(*chosen) && c.score > chosen->score)) chosen = &c;
-  }
+  std::stable_sort(screened.begin(), screened.end(), [&](const PartDetection& a, const PartDetection& b) {
+    if (clear(a) != clear(b)) return clear(a);
+    return a.score > b.score;
+  });
+  // near-equal fitness does not tell a pose that converged from one that stopped a degree off:
+  // the best kPolished are polished, and an accepted one beats a better-scored refused one
   PartDetection fine = d;
-  if (chosen && !evaluate(chosen->pose.cast<float>(), all_points, true, &fine)) fine = *chosen;
+  for (size_t k = 0; k < screened.size() && k < kPolished; ++k) {
+    if (k > 0 && !clear(screened[k])) break;
+    PartDetection f;
+    if (!evaluate(screened[k].pose.cast<float>(), all_points, true, &f)) f = screened[k];
+    const bool better = accepted(f, cfg) ? !accepted(fine, cfg) || f.score > fine.score : !accepted(fine, cfg) && f.score > fine.score;
+    if (k == 0 || better) fine = f;
+  }
   fine.refine_seconds = seconds(t_refine);
   return fine;
 }
