@@ -257,6 +257,7 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   for (auto& v : votes) {
     if (support && offSupport(m, v.T, *support, cfg, slack)) continue;
     v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), probe, 0.5 * best_score / static_cast<double>(order.size()));
+    best_score = std::max(best_score, v.score);
     bool merged = false;
     for (auto& h : top) {
       if (!distinct(h.T, v.T, static_cast<float>(2 * cfg.inlier_distance))) {
