@@ -74,12 +74,20 @@ DescriptorTrainingReport trainDescriptor(const DescriptorTrainingConfig& cfg,
   std::vector<TriangleMesh> meshes;
   for (const auto& path : cfg.model_meshes) meshes.push_back(loadValidMesh(path));
   for (int i = 0; i < cfg.generated_meshes; ++i) meshes.push_back(randomPartMesh(cfg.seed * 1000 + static_cast<uint64_t>(i)));
+  for (int i = 0; i < cfg.freeform_meshes; ++i)
+    meshes.push_back(randomFreeformMesh(cfg.seed * 1000 + static_cast<uint64_t>(i)));
   std::map<size_t, LaserView> model_clouds;
   std::map<size_t, ScanCloud> dense;  // each mesh's surface samples, shared by its views
   auto view = [&](size_t m, const Eigen::Isometry3d& pose, uint64_t vseed) {
     auto it = dense.find(m);
     if (it == dense.end()) it = dense.emplace(m, sampleMesh(meshes[m], LaserViewSetup().sample_spacing, m + 1)).first;
-    return laserView(meshes[m], pose, randomLaserSetup(vseed), vseed, &it->second);
+    LaserViewSetup setup = randomLaserSetup(vseed);
+    if (cfg.noise_max > 0) {
+      std::mt19937_64 nrng(vseed ^ 0x5eedull);
+      const double lo = std::log(3e-5), hi = std::log(std::max(3e-5, cfg.noise_max));
+      setup.noise = std::exp(lo + (hi - lo) * std::uniform_real_distribution<double>(0, 1)(nrng));
+    }
+    return laserView(meshes[m], pose, setup, vseed, &it->second);
   };
   auto wholeModel = [&](size_t m) -> const LaserView& {
     auto it = model_clouds.find(m);
@@ -94,6 +102,25 @@ DescriptorTrainingReport trainDescriptor(const DescriptorTrainingConfig& cfg,
   DescriptorTrainingReport rep;
   rep.parameters = net.parameterCount();
   int start = 0;
+  if (!cfg.init_model.empty() && !(cfg.resume && fileExists(ckpt))) {
+    const LearnedDescriptor init = LearnedDescriptor::load(cfg.init_model, cfg.net.dims);
+    const DescriptorNetConfig& ic = init.config();
+    // the centres' sampling may differ (fixed counts → spacing): it changes no weight's shape
+    if (ic.rotation != cfg.net.rotation || ic.centres.size() != cfg.net.centres.size() || ic.radius_small != cfg.net.radius_small ||
+        ic.radius_large != cfg.net.radius_large || ic.unit != cfg.net.unit || ic.point_radius != cfg.net.point_radius)
+      throw DescriptorModelError("init model " + cfg.init_model + ": its architecture (rotation " + ic.rotation + ", " +
+                                 std::to_string(ic.centres.size()) + " levels) differs from the training settings'");
+    auto src = init.impl().net->named_parameters();
+    torch::NoGradGuard ng;
+    for (auto& p : module->named_parameters()) {
+      const torch::Tensor* t = src.find(p.key());
+      if (!t && p.key().rfind("fpfh", 0) == 0) continue;  // an FPFH input added: its branch starts at zero
+      if (!t || t->sizes() != p.value().sizes())
+        throw DescriptorModelError("init model " + cfg.init_model + ": tensor " + p.key() + " does not fit this network");
+      p.value().copy_(*t);
+    }
+    say("weights from " + cfg.init_model);
+  }
   if (cfg.resume && fileExists(ckpt)) {
     torch::serialize::InputArchive a;
     a.load_from(ckpt);

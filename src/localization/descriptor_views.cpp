@@ -217,6 +217,61 @@ TriangleMesh randomPartMesh(uint64_t seed) {
   return out;
 }
 
+TriangleMesh randomFreeformMesh(uint64_t seed) {
+  std::mt19937_64 rng(seed * 15485863 + 11);
+  std::uniform_real_distribution<double> U(0, 1);
+  auto len = [&](double lo, double hi) { return lo + (hi - lo) * U(rng); };
+  // one smooth blob: a sphere, its radius rippled by a few low-frequency waves, stretched to an
+  // ellipsoid and bent along its long axis (x)
+  auto blob = [&](const Eigen::Vector3d& half) {
+    TriangleMesh m = makeSphere(1.0, 4);
+    struct Wave {
+      Eigen::Vector3d k;
+      double a, phase;
+    };
+    std::vector<Wave> waves;
+    const int nw = 2 + static_cast<int>(U(rng) * 4);
+    for (int w = 0; w < nw; ++w) {
+      Eigen::Vector3d k(U(rng) - 0.5, U(rng) - 0.5, U(rng) - 0.5);
+      k = k.normalized() * len(1.0, 4.0);
+      waves.push_back({k, len(0.03, 0.15), len(0, 2 * M_PI)});
+    }
+    const double bend = len(-0.8, 0.8) / half.x(), twist = len(-0.6, 0.6) / half.x();
+    for (auto& v : m.vertices) {
+      const Eigen::Vector3d u = v.cast<double>().normalized();
+      double r = 1;
+      for (const auto& w : waves) r += w.a * std::sin(w.k.dot(u) + w.phase);
+      Eigen::Vector3d p = (r * u).cwiseProduct(half);
+      p.y() += bend * p.x() * p.x();
+      const double t = twist * p.x();
+      p = Eigen::Vector3d(p.x(), std::cos(t) * p.y() - std::sin(t) * p.z(), std::sin(t) * p.y() + std::cos(t) * p.z());
+      v = p.cast<float>();
+    }
+    return m;
+  };
+  const int parts = 1 + static_cast<int>(U(rng) * 5);
+  TriangleMesh out;
+  for (int k = 0; k < parts; ++k) {
+    // a body, then limbs, necks, heads: longer and thinner, rooted at a point of what is there
+    const double a = k == 0 ? len(0.015, 0.06) : len(0.008, 0.045);
+    const double thin = k == 0 ? len(0.4, 1.0) : len(0.15, 0.6);
+    const Eigen::Vector3d half(a, a * thin * len(0.7, 1.0), a * thin * len(0.5, 1.0));
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    if (k > 0) {
+      std::normal_distribution<double> N(0, 1);
+      T.linear() = Eigen::Quaterniond(N(rng), N(rng), N(rng), N(rng)).normalized().toRotationMatrix();
+      const auto& root = out.vertices[static_cast<size_t>(U(rng) * (out.vertices.size() - 1))];
+      // the limb's near end at the root, sunk a little into the body
+      T.translation() = root.cast<double>() + T.linear() * Eigen::Vector3d(0.7 * a, 0, 0);
+    }
+    out.append(blob(half), T);
+  }
+  Eigen::Isometry3d C = Eigen::Isometry3d::Identity();
+  C.translation() = -out.bounds().center().cast<double>();
+  out.transform(C);
+  return out;
+}
+
 std::vector<std::pair<int, int>> trueCorrespondences(const LaserView& a, const LaserView& b, double tolerance) {
   std::vector<std::pair<int, int>> out;
   if (b.truth.empty()) return out;

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <numeric>
 #include <random>
 
@@ -16,6 +17,7 @@
 
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/common/point_grid.hpp"
+#include "cellsight/localization/model_library.hpp"
 #include "learned_descriptor_impl.hpp"
 
 namespace cellsight {
@@ -24,11 +26,16 @@ namespace {
 
 using Vec3 = Eigen::Vector3f;
 
-/// Farthest-point sampling of m of the points (the first: the one farthest from the mean).
-std::vector<int> farthestPoints(const std::vector<Vec3>& p, int m) {
+/// Farthest-point sampling of m of the points (the first: the one farthest from the mean); with
+/// `spacing` > 0, until every point lies within `spacing` of a centre (m is not used). Exact
+/// farthest-point order: each new centre lowers the distance of the points nearer it than the
+/// current farthest distance only, which a grid finds once that distance is a few cells; a
+/// lazy max-heap gives the next farthest point.
+std::vector<int> farthestPoints(const std::vector<Vec3>& p, int m, float spacing = 0) {
   const int n = static_cast<int>(p.size());
   std::vector<int> out;
-  if (m >= n) {
+  if (spacing > 0) m = n;
+  if (m >= n && spacing <= 0) {
     out.resize(n);
     std::iota(out.begin(), out.end(), 0);
     return out;
@@ -43,19 +50,45 @@ std::vector<int> farthestPoints(const std::vector<Vec3>& p, int m) {
     if (d > far) far = d, first = i;
   }
   std::vector<float> dist(n, std::numeric_limits<float>::max());
-  out.reserve(m);
+  out.reserve(std::min(m, n));
+  const float cell = spacing > 0 ? 2 * spacing : 0.f;
+  std::unique_ptr<PointGrid> grid;
+  if (cell > 0) grid = std::make_unique<PointGrid>(p, cell);
+  std::vector<std::pair<float, int>> heap;  // (distance, point), lazily updated
+  const float stop = spacing * spacing;
   int cur = first;
   for (int k = 0; k < m; ++k) {
     out.push_back(cur);
-    int next = 0;
-    float best = -1;
     const Vec3 c = p[cur];
-    for (int i = 0; i < n; ++i) {
-      const float d = (p[i] - c).squaredNorm();
-      if (d < dist[i]) dist[i] = d;
-      if (dist[i] > best) best = dist[i], next = i;
+    const float reach = dist[cur];  // no point is farther than this from the centres so far
+    dist[cur] = 0;
+    auto lower = [&](int i, float d) {
+      if (d < dist[i]) {
+        dist[i] = d;
+        if (grid) {
+          heap.emplace_back(d, i);
+          std::push_heap(heap.begin(), heap.end());
+        }
+      }
+    };
+    if (grid && reach < 64 * cell * cell) {
+      grid->forEachWithin(c, std::sqrt(reach), [&](size_t i, float d2) { lower(static_cast<int>(i), d2); });
+    } else {
+      for (int i = 0; i < n; ++i) lower(i, (p[i] - c).squaredNorm());
     }
-    cur = next;
+    if (grid) {
+      while (!heap.empty() && heap.front().first != dist[heap.front().second]) {
+        std::pop_heap(heap.begin(), heap.end());
+        heap.pop_back();
+      }
+      if (heap.empty()) break;
+      cur = heap.front().second;
+    } else {
+      float best = -1;
+      for (int i = 0; i < n; ++i)
+        if (dist[i] > best) best = dist[i], cur = i;
+    }
+    if (spacing > 0 && dist[cur] <= stop) break;
   }
   return out;
 }
@@ -121,6 +154,18 @@ Structure buildStructure(const std::vector<Vec3>& p0, const std::vector<Vec3>& n
   const bool lrf = c.rotation == "lrf";
   Structure s;
   s.n = static_cast<int64_t>(p0.size());
+  if (c.fpfh_radius > 0) {
+    ScanCloud cloud;
+    cloud.points = p0;
+    cloud.normals = n0;
+    cloud.intensity.assign(p0.size(), 1.f);
+    const std::vector<Fpfh> f = computeFpfh(cloud, c.fpfh_radius);
+    std::vector<float> x(p0.size() * 33, 0.f);
+    for (size_t i = 0; i < f.size() && i < p0.size(); ++i)
+      for (int k = 0; k < 33; ++k)
+        if (std::isfinite(f[i][k])) x[i * 33 + k] = f[i][k] / 100.f;
+    s.fpfh = toTensor(x, {s.n, 33});
+  }
   // per-point encoder: every point's neighbourhood
   {
     const float r = static_cast<float>(c.point_radius);
@@ -149,7 +194,8 @@ Structure buildStructure(const std::vector<Vec3>& p0, const std::vector<Vec3>& n
   std::vector<Vec3> prev = p0, prev_n = n0;
   for (size_t l = 0; l < c.centres.size(); ++l) {
     Structure::Level L;
-    const std::vector<int> centre = farthestPoints(prev, c.centres[l]);
+    const std::vector<int> centre =
+        farthestPoints(prev, c.centres[l], c.centre_spacing.empty() ? 0.f : static_cast<float>(c.centre_spacing[l]));
     L.m = static_cast<int64_t>(centre.size());
     const float rs = static_cast<float>(c.radius_small[l]), rl = static_cast<float>(c.radius_large[l]);
     const int ks = c.samples_small[l], kl = c.samples_large[l];
@@ -191,13 +237,19 @@ Structure buildStructure(const std::vector<Vec3>& p0, const std::vector<Vec3>& n
     std::vector<float> w;
     up.reserve(prev.size() * 3);
     w.reserve(prev.size() * 3);
+    // with spaced centres every point has one within the spacing: the three nearest are
+    // looked up in a grid (all centres scanned only where fewer than three are near)
+    const float near = c.centre_spacing.empty() ? 0.f : 3.f * static_cast<float>(c.centre_spacing[l]);
+    std::vector<Vec3> centre_points;
+    for (int ci : centre) centre_points.push_back(prev[ci]);
+    std::unique_ptr<PointGrid> centre_grid;
+    if (near > 0) centre_grid = std::make_unique<PointGrid>(centre_points, near);
     for (const auto& q : prev) {
       int b[3] = {0, 0, 0};
       float d[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
                     std::numeric_limits<float>::max()};
-      for (size_t k = 0; k < centre.size(); ++k) {
-        const float dd = (prev[centre[k]] - q).squaredNorm();
-        if (dd >= d[2]) continue;
+      auto consider = [&](size_t k, float dd) {
+        if (dd >= d[2]) return;
         int at = 2;
         while (at > 0 && dd < d[at - 1]) {
           d[at] = d[at - 1];
@@ -206,6 +258,11 @@ Structure buildStructure(const std::vector<Vec3>& p0, const std::vector<Vec3>& n
         }
         d[at] = dd;
         b[at] = static_cast<int>(k);
+      };
+      if (centre_grid) centre_grid->forEachWithin(q, near, consider);
+      if (d[2] == std::numeric_limits<float>::max()) {
+        d[0] = d[1] = d[2] = std::numeric_limits<float>::max();
+        for (size_t k = 0; k < centre_points.size(); ++k) consider(k, (centre_points[k] - q).squaredNorm());
       }
       float ws[3], sum = 0;
       for (int a = 0; a < 3; ++a) {
@@ -268,6 +325,12 @@ NetImpl::NetImpl(const DescriptorNetConfig& c) : config(c) {
     carried = o;
   }
   head = register_module("head", torch::nn::Linear(carried, c.dims));
+  if (c.fpfh_radius > 0) {
+    fpfh = register_module("fpfh", Mlp(33, std::vector<int64_t>{2 * w, 2 * w}));
+    fpfh_head = register_module("fpfh_head", torch::nn::Linear(torch::nn::LinearOptions(2 * w, c.dims).bias(false)));
+    torch::NoGradGuard ng;
+    fpfh_head->weight.zero_();
+  }
 }
 
 torch::Tensor NetImpl::forward(const Structure& s) {
@@ -288,7 +351,9 @@ torch::Tensor NetImpl::forward(const Structure& s) {
     const auto interp = (g.index_select(0, L.up_idx).view({p, 3, -1}) * L.up_w).sum(1);
     g = up[l]->forward(torch::cat({interp, f[l]}, 1));
   }
-  return torch::nn::functional::normalize(head->forward(g), torch::nn::functional::NormalizeFuncOptions().dim(1));
+  torch::Tensor out = head->forward(g);
+  if (fpfh) out = out + fpfh_head->forward(fpfh->forward(s.fpfh));
+  return torch::nn::functional::normalize(out, torch::nn::functional::NormalizeFuncOptions().dim(1));
 }
 
 }  // namespace descriptor_detail
@@ -307,6 +372,10 @@ void checkDescriptorNetConfig(const DescriptorNetConfig& c) {
     if (c.centres[l] < 1 || c.samples_small[l] < 1 || c.samples_large[l] < 1) bad("centre and sample counts must be ≥ 1");
     if (!(c.radius_small[l] > 0) || !(c.radius_large[l] >= c.radius_small[l])) bad("radii must be > 0, large ≥ small");
   }
+  if (!c.centre_spacing.empty() && c.centre_spacing.size() != L) bad("centre_spacing needs one entry per level, or none");
+  for (double d : c.centre_spacing)
+    if (!(d > 0) || !std::isfinite(d)) bad("centre_spacing must be > 0");
+  if (!(c.fpfh_radius >= 0) || !std::isfinite(c.fpfh_radius)) bad("fpfh_radius must be ≥ 0");
   if (!(c.point_radius > 0) || c.point_samples < 1) bad("point_radius must be > 0 and point_samples ≥ 1");
 }
 
@@ -320,6 +389,18 @@ LearnedDescriptor::LearnedDescriptor(const DescriptorNetConfig& config, uint64_t
   (void)blas_single;
   torch::manual_seed(seed);
   impl_ = std::make_unique<Impl>(config);
+}
+
+LearnedDescriptor LearnedDescriptor::withCentres(const std::vector<int>& centres,
+                                                 const std::vector<double>& centre_spacing) const {
+  DescriptorNetConfig c = config();
+  c.centres = centres;
+  c.centre_spacing = centre_spacing;
+  LearnedDescriptor out(c);
+  torch::NoGradGuard no_grad;
+  auto src = impl_->net->named_parameters();
+  for (auto& p : out.impl_->net->named_parameters()) p.value().copy_(src[p.key()]);
+  return out;
 }
 
 LearnedDescriptor::~LearnedDescriptor() = default;
@@ -357,10 +438,12 @@ void LearnedDescriptor::save(const std::string& path) const {
   a.write("meta.unit", c10::IValue(c.unit));
   a.write("meta.width", c10::IValue(static_cast<int64_t>(c.width)));
   a.write("meta.centres", c10::IValue(toInt64(c.centres)));
+  if (!c.centre_spacing.empty()) a.write("meta.centre_spacing", c10::IValue(c.centre_spacing));
   a.write("meta.radius_small", c10::IValue(c.radius_small));
   a.write("meta.radius_large", c10::IValue(c.radius_large));
   a.write("meta.samples_small", c10::IValue(toInt64(c.samples_small)));
   a.write("meta.samples_large", c10::IValue(toInt64(c.samples_large)));
+  if (c.fpfh_radius > 0) a.write("meta.fpfh_radius", c10::IValue(c.fpfh_radius));
   a.write("meta.point_radius", c10::IValue(c.point_radius));
   a.write("meta.point_samples", c10::IValue(static_cast<int64_t>(c.point_samples)));
   for (const auto& p : impl_->net->named_parameters()) a.write(p.key(), p.value().detach(), /*is_buffer=*/false);
@@ -402,6 +485,7 @@ LearnedDescriptor LearnedDescriptor::load(const std::string& path, int expected_
     c.width = static_cast<int>(v.toInt());
     a.read("meta.centres", v);
     c.centres = toInt(v.toIntVector());
+    if (a.try_read("meta.centre_spacing", v)) c.centre_spacing = v.toDoubleVector();  // absent: fixed counts
     a.read("meta.radius_small", v);
     c.radius_small = v.toDoubleVector();
     a.read("meta.radius_large", v);
@@ -410,6 +494,7 @@ LearnedDescriptor LearnedDescriptor::load(const std::string& path, int expected_
     c.samples_small = toInt(v.toIntVector());
     a.read("meta.samples_large", v);
     c.samples_large = toInt(v.toIntVector());
+    if (a.try_read("meta.fpfh_radius", v)) c.fpfh_radius = v.toDouble();  // absent: no FPFH input
     a.read("meta.point_radius", v);
     c.point_radius = v.toDouble();
     a.read("meta.point_samples", v);

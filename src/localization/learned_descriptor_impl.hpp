@@ -21,6 +21,7 @@ constexpr int64_t kPointInputs = 10;
 /// samples and groups, and the groups' coordinates in their centre's frame (units).
 struct Structure {
   int64_t n = 0;          ///< input points
+  torch::Tensor fpfh;     ///< [n, 33] FPFH / 100 (DescriptorNetConfig::fpfh_radius > 0)
   torch::Tensor x0;       ///< [n, k0, kPointInputs] per-point encoder input
   struct Level {
     int64_t m = 0;
@@ -51,6 +52,8 @@ struct NetImpl : torch::nn::Module {
   Mlp point{nullptr};
   std::vector<Mlp> small, large, up;
   torch::nn::Linear head{nullptr};
+  Mlp fpfh{nullptr};                    ///< fpfh_radius > 0
+  torch::nn::Linear fpfh_head{nullptr};
 };
 TORCH_MODULE(Net);
 

@@ -21,6 +21,11 @@ int main(int argc, char** argv) {
   app.add_option("--mesh", c.model_meshes, "a part's mesh to train on (repeat); the rest are generated");
   app.add_option("--generated", c.generated_meshes, "generated meshes (unions of boxes, cylinders, tubes)")
       ->check(cellsight_tools::nonNegativeInt())->capture_default_str();
+  app.add_option("--freeform", c.freeform_meshes, "generated freeform meshes (smooth blobs, bent and joined)")
+      ->check(cellsight_tools::nonNegativeInt())->capture_default_str();
+  app.add_option("--noise-max", c.noise_max, "depth noise drawn per view from 30 um to this (m; 0: the laser scanner's)")
+      ->check(cellsight_tools::nonNegative())->capture_default_str();
+  app.add_option("--init", c.init_model, "start from this model file's weights (fine-tuning)")->check(CLI::ExistingFile);
   app.add_option("--steps", c.steps, "optimiser steps, one pair of views each")->check(cellsight_tools::positiveInt())
       ->capture_default_str();
   app.add_option("--time-limit", c.time_limit_s, "stop and save after this many seconds (0: none)")
@@ -39,6 +44,11 @@ int main(int argc, char** argv) {
   int levels = 2;
   app.add_option("--levels", levels, "set-abstraction levels (of 512, 128, 32 centres; more: a wider context)")
       ->check(CLI::Range(1, 3))->capture_default_str();
+  app.add_option("--centre-spacing", c.net.centre_spacing,
+                 "per level: sample centres until every point is this close to one (units; default: fixed counts)")
+      ->delimiter(',');
+  app.add_option("--fpfh-radius", c.net.fpfh_radius, "> 0: every point's FPFH over this radius (units) is an input too")
+      ->check(cellsight_tools::nonNegative())->capture_default_str();
   app.add_option("--point-radius", c.net.point_radius, "neighbourhood of the per-point encoder (network units)")
       ->check(cellsight_tools::positive())->capture_default_str();
   app.add_option("--point-samples", c.net.point_samples, "neighbours of the per-point encoder")
@@ -60,6 +70,10 @@ int main(int argc, char** argv) {
       ->check(cellsight_tools::positiveInt())->capture_default_str();
   app.add_option("--threads", c.threads, "libtorch threads")->check(cellsight_tools::positiveInt())->capture_default_str();
   app.add_option("--seed", c.seed, "seed of weights and data")->capture_default_str();
+  std::string resample;
+  app.add_option("--resample", resample,
+                 "no training: write this model file's weights with --centre-spacing (or the fixed counts) to --output")
+      ->check(CLI::ExistingFile);
   bool quiet = false;
   app.add_flag("--quiet", quiet, "no progress bar");
   if (auto code = cellsight_tools::parse(app, argc, argv)) return *code;
@@ -70,6 +84,13 @@ int main(int argc, char** argv) {
   c.net.samples_small.resize(levels);
   c.net.samples_large.resize(levels);
   return cellsight_tools::runTool([&] {
+    if (!resample.empty()) {
+      const LearnedDescriptor in = LearnedDescriptor::load(resample);
+      in.withCentres(in.config().centres, c.net.centre_spacing).save(c.output);
+      std::printf("%s: centres %s; written to %s\n", resample.c_str(),
+                  c.net.centre_spacing.empty() ? "fixed counts" : "sampled down to a spacing", c.output.c_str());
+      return 0;
+    }
     const auto r = trainDescriptor(c, [](const std::string& s) { std::cout << s << std::endl; });
     std::printf("trained %d steps in %.0f s; %zu parameters; best validation feature-match recall %.3f; model %s\n", r.steps,
                 r.seconds, r.parameters, r.best_validation_recall, c.output.c_str());

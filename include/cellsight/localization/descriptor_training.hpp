@@ -51,6 +51,10 @@ LaserView modelCloud(const TriangleMesh& mesh, double voxel = 0.002, double norm
 /// A generated training mesh: 1–4 boxes, cylinders or tubes of 8–80 mm overlapping or touching.
 TriangleMesh randomPartMesh(uint64_t seed);
 
+/// A generated freeform mesh (toys, animals, fruit, castings): 1–5 smooth blobs — spheres with
+/// rippled radii, stretched, bent and twisted — a body of 15–60 mm and limbs rooted on it.
+TriangleMesh randomFreeformMesh(uint64_t seed);
+
 /// Pairs (index in a, index in b) whose true positions lie within `tolerance` (each point of a
 /// with its nearest in b).
 std::vector<std::pair<int, int>> trueCorrespondences(const LaserView& a, const LaserView& b, double tolerance);
@@ -90,7 +94,11 @@ struct DescriptorTrainingConfig {
   int negative_pool = 512;         ///< random points of each side the hardest negative is taken from
   double model_pair_share = 0.5;   ///< share of pairs that are (view, whole model) — the matcher's use
   std::vector<std::string> model_meshes;  ///< our parts' meshes used in training
-  int generated_meshes = 200;      ///< plus this many generated ones
+  int generated_meshes = 200;      ///< plus this many generated ones (randomPartMesh)
+  int freeform_meshes = 0;         ///< plus this many generated freeform ones (randomFreeformMesh)
+  double noise_max = 0;            ///< m; > 0: each view's depth noise drawn log-uniformly from
+                                   ///< 30 µm to this (other sensors than ours); 0: the laser scanner's
+  std::string init_model;          ///< start from this model file's weights (fine-tuning); empty: fresh
   int validate_every = 250;        ///< steps between validation figures (and checkpoints)
   int validation_pairs = 24;       ///< fixed pairs of held-out viewpoints of the training meshes
   int threads = 2;                 ///< libtorch intra-op threads

@@ -39,10 +39,18 @@ struct DescriptorNetConfig {
   /// descriptor like FPFH's 10 mm; with a third (30 mm) the descriptors learn a view's context,
   /// which the whole model does not share, and validation recall fell as training went on.
   std::vector<int> centres = {512, 128};
+  /// When set (one per level, units): farthest-point sampling goes on until every point lies
+  /// within this distance of a centre, whatever the cloud's extent, and `centres` is not used.
+  /// A fixed count spreads its centres over the whole cloud: a part inside a whole scene then
+  /// gets far fewer of them than the part alone, and its descriptors differ.
+  std::vector<double> centre_spacing;
   std::vector<double> radius_small = {0.4, 1.0};
   std::vector<double> radius_large = {0.8, 1.5};
   std::vector<int> samples_small = {16, 16};
   std::vector<int> samples_large = {32, 32};
+  /// > 0 (units): every point's FPFH over this radius is an input too, through its own MLP
+  /// added at the head (zero-initialised: a network fine-tuned with it starts where it was).
+  double fpfh_radius = 0;
   double point_radius = 0.5;      ///< units, the per-point encoder's neighbourhood
   int point_samples = 16;
 };
@@ -71,6 +79,10 @@ class LearnedDescriptor {
   void save(const std::string& path) const;
 
   const DescriptorNetConfig& config() const;
+  /// The same weights with other centre sampling (`centre_spacing` empty: the fixed `centres`
+  /// counts): no weight depends on how many centres there are. Throws DescriptorModelError for
+  /// an invalid sampling.
+  LearnedDescriptor withCentres(const std::vector<int>& centres, const std::vector<double>& centre_spacing) const;
   size_t parameterCount() const;
 
   /// Descriptors of every point: rows = points, K columns, unit length. `points` and `normals`
