@@ -95,32 +95,17 @@ DescriptorTrainingReport trainDescriptor(const DescriptorTrainingConfig& cfg,
     return it->second;
   };
 
+  const std::string ckpt = cfg.checkpoint.empty() ? cfg.output + ".ckpt" : cfg.checkpoint;
   LearnedDescriptor net(cfg.net, cfg.seed);
+  if (!cfg.init_model.empty() && !(cfg.resume && fileExists(ckpt))) {
+    net = LearnedDescriptor::load(cfg.init_model, cfg.net.dims).withConfig(cfg.net);
+    say("weights from " + cfg.init_model);
+  }
   auto& module = net.impl().net;
   torch::optim::Adam adam(module->parameters(), torch::optim::AdamOptions(cfg.learning_rate));
-  const std::string ckpt = cfg.checkpoint.empty() ? cfg.output + ".ckpt" : cfg.checkpoint;
   DescriptorTrainingReport rep;
   rep.parameters = net.parameterCount();
   int start = 0;
-  if (!cfg.init_model.empty() && !(cfg.resume && fileExists(ckpt))) {
-    const LearnedDescriptor init = LearnedDescriptor::load(cfg.init_model, cfg.net.dims);
-    const DescriptorNetConfig& ic = init.config();
-    // the centres' sampling may differ (fixed counts → spacing): it changes no weight's shape
-    if (ic.rotation != cfg.net.rotation || ic.centres.size() != cfg.net.centres.size() || ic.radius_small != cfg.net.radius_small ||
-        ic.radius_large != cfg.net.radius_large || ic.unit != cfg.net.unit || ic.point_radius != cfg.net.point_radius)
-      throw DescriptorModelError("init model " + cfg.init_model + ": its architecture (rotation " + ic.rotation + ", " +
-                                 std::to_string(ic.centres.size()) + " levels) differs from the training settings'");
-    auto src = init.impl().net->named_parameters();
-    torch::NoGradGuard ng;
-    for (auto& p : module->named_parameters()) {
-      const torch::Tensor* t = src.find(p.key());
-      if (!t && p.key().rfind("fpfh", 0) == 0) continue;  // an FPFH input added: its branch starts at zero
-      if (!t || t->sizes() != p.value().sizes())
-        throw DescriptorModelError("init model " + cfg.init_model + ": tensor " + p.key() + " does not fit this network");
-      p.value().copy_(*t);
-    }
-    say("weights from " + cfg.init_model);
-  }
   if (cfg.resume && fileExists(ckpt)) {
     torch::serialize::InputArchive a;
     a.load_from(ckpt);

@@ -400,15 +400,25 @@ LearnedDescriptor::LearnedDescriptor(const DescriptorNetConfig& config, uint64_t
   impl_ = std::make_unique<Impl>(config);
 }
 
-LearnedDescriptor LearnedDescriptor::withCentres(const std::vector<int>& centres,
-                                                 const std::vector<double>& centre_spacing) const {
-  DescriptorNetConfig c = config();
-  c.centres = centres;
-  c.centre_spacing = centre_spacing;
+LearnedDescriptor LearnedDescriptor::withConfig(const DescriptorNetConfig& c) const {
+  const DescriptorNetConfig& o = config();
+  if (c.dims != o.dims || c.rotation != o.rotation || c.unit != o.unit || c.width != o.width ||
+      c.centres.size() != o.centres.size() || c.radius_small != o.radius_small || c.radius_large != o.radius_large ||
+      c.samples_small != o.samples_small || c.samples_large != o.samples_large || c.point_radius != o.point_radius ||
+      c.point_samples != o.point_samples)
+    throw DescriptorModelError("learned descriptor: only the centres' sampling and the FPFH input may change; the "
+                               "network (K, rotation, unit, width, levels, radii, group sizes) must stay the same");
   LearnedDescriptor out(c);
   torch::NoGradGuard no_grad;
-  auto src = impl_->net->named_parameters();
-  for (auto& p : out.impl_->net->named_parameters()) p.value().copy_(src[p.key()]);
+  const auto src = impl_->net->named_parameters();
+  auto dst = out.impl_->net->named_parameters();
+  for (const auto& p : src)
+    if (!dst.contains(p.key())) throw DescriptorModelError("learned descriptor: the new settings drop tensor " + p.key());
+  for (auto& p : dst) {
+    const torch::Tensor* t = src.find(p.key());
+    if (!t && p.key().rfind("fpfh", 0) == 0) continue;  // an FPFH input added: its branch starts at zero
+    p.value().copy_(*t);  // every other tensor has the same name and shape in the same network
+  }
   return out;
 }
 

@@ -86,7 +86,9 @@ int main(int argc, char** argv) {
   return cellsight_tools::runTool([&] {
     if (!resample.empty()) {
       const LearnedDescriptor in = LearnedDescriptor::load(resample);
-      in.withCentres(in.config().centres, c.net.centre_spacing).save(c.output);
+      DescriptorNetConfig resampled = in.config();
+      resampled.centre_spacing = c.net.centre_spacing;
+      in.withConfig(resampled).save(c.output);
       std::printf("%s: centres %s; written to %s\n", resample.c_str(),
                   c.net.centre_spacing.empty() ? "fixed counts" : "sampled down to a spacing", c.output.c_str());
       return 0;

@@ -139,7 +139,9 @@ TEST(LearnedDescriptor, SpacedCentresKeepAPartsDescriptorsInsideAWholeScene) {
   };
   const LearnedDescriptor shipped = LearnedDescriptor::load(kRoot + "/config/descriptors/learned_k16.pt", 16);
   ASSERT_FALSE(shipped.config().centre_spacing.empty());
-  const double spaced = selfMatch(shipped), fixed = selfMatch(shipped.withCentres({512, 128}, {}));
+  DescriptorNetConfig fixed_counts = shipped.config();
+  fixed_counts.centre_spacing.clear();
+  const double spaced = selfMatch(shipped), fixed = selfMatch(shipped.withConfig(fixed_counts));
   std::printf("part in a scene matched to the part alone: fixed counts %.3f, spaced centres %.3f\n", fixed, spaced);
   EXPECT_GT(spaced, 0.3);
   EXPECT_GT(spaced, fixed + 0.15);
@@ -147,7 +149,19 @@ TEST(LearnedDescriptor, SpacedCentresKeepAPartsDescriptorsInsideAWholeScene) {
   const std::string f = file("spaced.pt");
   shipped.save(f);
   EXPECT_EQ(LearnedDescriptor::load(f).config().centre_spacing, shipped.config().centre_spacing);
-  EXPECT_THROW(shipped.withCentres({512, 128}, {0.25}), DescriptorModelError);
+  DescriptorNetConfig bad = shipped.config();
+  bad.centre_spacing = {0.25};
+  EXPECT_THROW(shipped.withConfig(bad), DescriptorModelError);  // one spacing for two levels
+  bad = shipped.config();
+  bad.width = 16;
+  EXPECT_THROW(shipped.withConfig(bad), DescriptorModelError);  // another network
+  // an FPFH input added: the same descriptors until its branch is trained
+  DescriptorNetConfig with_fpfh = shipped.config();
+  with_fpfh.fpfh_radius = 1.0;
+  const LearnedDescriptor grown = shipped.withConfig(with_fpfh);
+  EXPECT_LT((grown.compute(v.cloud.points, v.cloud.normals) - shipped.compute(v.cloud.points, v.cloud.normals)).cwiseAbs().maxCoeff(),
+            1e-5f);
+  EXPECT_THROW(grown.withConfig(shipped.config()), DescriptorModelError);  // would drop the branch
 }
 
 TEST(LearnedDescriptor, BadModelFilesAreRefusedWithTheirCause) {

@@ -79,10 +79,11 @@ class LearnedDescriptor {
   void save(const std::string& path) const;
 
   const DescriptorNetConfig& config() const;
-  /// The same weights with other centre sampling (`centre_spacing` empty: the fixed `centres`
-  /// counts): no weight depends on how many centres there are. Throws DescriptorModelError for
-  /// an invalid sampling.
-  LearnedDescriptor withCentres(const std::vector<int>& centres, const std::vector<double>& centre_spacing) const;
+  /// The same weights under `config`, which may differ from config() only in the centres'
+  /// sampling (`centres`, `centre_spacing`: no weight depends on how many centres there are) and
+  /// in an added FPFH input (`fpfh_radius`; its branch starts at zero). Throws
+  /// DescriptorModelError for any other difference, a dropped tensor or an invalid setting.
+  LearnedDescriptor withConfig(const DescriptorNetConfig& config) const;
   size_t parameterCount() const;
 
   /// Descriptors of every point: rows = points, K columns, unit length. `points` and `normals`
