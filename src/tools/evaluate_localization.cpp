@@ -318,7 +318,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
     const Eigen::Vector3d at = dets[i].pose * centroids.centroid(dets[i].model);
     json f = {{"model", dets[i].model},       {"fitness", dets[i].fitness}, {"coverage", dets[i].coverage},
               {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through},
-              {"at", {at.x(), at.y(), at.z()}}};
+              {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)}};
     double nearest = 1e9;
     for (const auto& o : scene.objects) {
       const Eigen::Vector3d c = lib.has(o.model) ? Eigen::Vector3d(o.T_base_object * centroids.centroid(o.model))
@@ -408,7 +408,8 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
         p["nearest_rejected"] = {{"fitness", r.fitness},       {"coverage", r.coverage},
                                  {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through},
                                  {"cluster", r.cluster},       {"t_err_mm", e.translation * 1e3},
-                                 {"r_err_deg", e.rotation / kDeg}};
+                                 {"r_err_deg", e.rotation / kDeg},
+                                 {"pose", cellsight_tools::poseToJson(r.pose)}};
       }
     }
   }

@@ -34,4 +34,9 @@ inline Eigen::Isometry3d poseFromJson(const nlohmann::json& d) {
   return T;
 }
 
+inline nlohmann::json poseToJson(const Eigen::Isometry3d& T) {
+  const Eigen::Quaterniond q(T.linear());
+  return {{"xyz", {T.translation().x(), T.translation().y(), T.translation().z()}}, {"quat", {q.x(), q.y(), q.z(), q.w()}}};
+}
+
 }  // namespace cellsight_tools

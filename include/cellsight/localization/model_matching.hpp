@@ -110,6 +110,9 @@ struct MatchingConfig {
   double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)
   double max_rmse = 0.0015;        ///< m, point-to-plane RMS of the inliers
   bool check_visibility = true;    ///< fitness over points the viewpoint can see
+  /// Fitness counts scan points of every cluster of the locate() call (false: only the matched
+  /// cluster's): a part that clustering split is not short of its own points.
+  bool fitness_whole_scan = true;
   /// Parts rest on a support (the table the clustering removed): a pose that puts the model more
   /// than this below the support plane is not physical and is discarded before validation
   /// (a thin flat part seen from above fits upside down as well). Used when locate() is given

@@ -387,11 +387,20 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     }
     round.push_back(std::move(w));
   }
+  // the fitness test sees every cluster's points: a part that clustering split between two
+  // clusters is matched in one and explains its model's points in both
+  PointGrid whole;
+  if (cfg.fitness_whole_scan && round.size() > 1) {
+    std::vector<Vec3> all;
+    for (const auto& w : round) all.insert(all.end(), w.points.begin(), w.points.end());
+    whole = PointGrid(all, static_cast<float>(cfg.fitness_radius));
+  }
   for (int instance = 0; instance < std::max(1, cfg.max_instances) && !round.empty(); ++instance) {
     parallelFor(round.size(), cfg.threads, [&](size_t i) {
       const auto t = Clock::now();
       round[i].scene = prepareScene(round[i].points, cfg);
       round[i].scene->support_seen = &seen;
+      if (whole.size() > 0) round[i].scene->whole = &whole;
       if (learned_ && cfg.descriptor == "learned" && round[i].scene->coarse.size() >= 3) {
         const auto td = Clock::now();
         SceneData& sd = *round[i].scene;
@@ -488,8 +497,30 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     }
     round = std::move(next);
   }
+  // a part that clustering split is found in each piece at about the same pose: the better
+  // explained one stays (two parts of one model cannot share their centre)
+  std::vector<size_t> order(out.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return out[a].fitness > out[b].fitness; });
+  std::vector<bool> drop(out.size(), false);
+  for (size_t i = 0; i < order.size(); ++i) {
+    const PartDetection& d = out[order[i]];
+    const auto& mi = *idx[std::find(models.begin(), models.end(), d.model) - models.begin()];
+    for (size_t j = 0; j < i && !drop[order[i]]; ++j) {
+      const PartDetection& k = out[order[j]];
+      if (drop[order[j]] || k.model != d.model) continue;
+      if ((k.pose * mi.centroid - d.pose * mi.centroid).norm() < 0.25 * mi.diameter) {
+        drop[order[i]] = true;
+        st.warnings.push_back(d.model + " found twice at one place (cluster " + std::to_string(d.cluster) + " and " +
+                              std::to_string(k.cluster) + ": pieces of a part that clustering split): the better explained kept");
+      }
+    }
+  }
+  std::vector<PartDetection> kept;
+  for (size_t i = 0; i < out.size(); ++i)
+    if (!drop[i]) kept.push_back(out[i]);
   st.seconds = seconds(t0);
-  return out;
+  return kept;
 }
 
 std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,

@@ -105,6 +105,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   atLeast("refine_min_points", c.refine_min_points, 20);
   positive("refine_max_shift", c.refine_max_shift);
   c.icp_centre_slack = m.getBool("icp_centre_slack", c.icp_centre_slack);
+  c.fitness_whole_scan = m.getBool("fitness_whole_scan", c.fitness_whole_scan);
   positive("icp_slack_range", c.icp_slack_range);
   positive("icp_slack_tolerance", c.icp_slack_tolerance);
   share("icp_slack_eigen_ratio", c.icp_slack_eigen_ratio);

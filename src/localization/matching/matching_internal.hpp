@@ -180,6 +180,9 @@ struct ScenePlane {
 struct SceneData {
   ScenePlane plane;
   const SupportSeen* support_seen = nullptr;  // shared by the clusters of one locate() call
+  /// every cluster's points (shared by the clusters of one locate() call; null: this cluster's):
+  /// the fitness test, so that a part that clustering split is not short of its own points
+  const PointGrid* whole = nullptr;
   std::vector<Vec3> all;       // finite input points
   ScanCloud coarse;            // voxelised, normals toward the viewpoint
   std::vector<Fpfh> fpfh;

@@ -76,7 +76,7 @@ bool SupportSeen::seenBehind(const Vec3& eye, const Vec3& p, float min_height) c
 }
 
 /// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
-/// itself) that have a scene point within r_F.
+/// itself) that have a scene point within r_F (of every cluster of the call when s.whole is set).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
                       const MatchingConfig& cfg, double* see_through) {
   const Eigen::Isometry3f Ti = T.inverse();
@@ -102,7 +102,9 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     ++visible;
     const Vec3 p = T * mp[i];
     if (seen && seen->seenBehind(cfg.viewpoint, p, min_height)) ++through;
-    if (cfg.scene_search == "grid") {
+    if (s.whole) {
+      matched += s.whole->anyWithin(p, static_cast<float>(cfg.fitness_radius));
+    } else if (cfg.scene_search == "grid") {
       matched += s.grid.anyWithin(p, static_cast<float>(cfg.fitness_radius));
     } else if (s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2) {
       ++matched;
