@@ -318,6 +318,18 @@ TEST(ModelMatching, APartSplitBetweenTwoClustersIsFoundOnceWhole) {
   for (const auto& d : pieces) EXPECT_LT(d.fitness, one[0].fitness - 0.2);
 }
 
+// The top of a sphere as the simulated scanner saw it in generated cell 3034 (its side went to
+// a touching bracket's cluster): 181 points of its top 8 mm. On a sphere every pair of a given
+// distance has the same feature, so votes do not tell poses apart, and PPF gave this cap no pose
+// at all; the centre comes from the points and their normals.
+TEST(ModelMatching, TheTopOfASphereGivesItsCentre) {
+  const Recorded r = locateRecorded("sphere_top_3034.ply", 181, {"sphere25"}, "sphere25",
+                                    {0.57247967398705579, 0.0024613539319799649, 0}, {1, 0, 0, 0});
+  ASSERT_EQ(r.found.size(), 1u);
+  std::printf("sphere top: %.3f mm, fitness %.2f\n", r.error.translation * 1e3, r.found[0].fitness);
+  EXPECT_LT(r.error.translation, 0.5e-3);
+}
+
 // Fine PPF bins make the key range too large for the table's dense index (> 2^24 keys): the
 // table falls back to searching its sorted keys and must find the same part.
 TEST(ModelMatching, FinePpfBinsUseTheSearchedTable) {

@@ -3,6 +3,7 @@
 #include <pcl/features/normal_3d.h>
 #include <pcl/search/kdtree.h>
 
+#include <array>
 #include <numeric>
 #include <stdexcept>
 
@@ -53,6 +54,35 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
       if (accepted(centred, cfg)) *c = centred;
     }
   }
+  return true;
+}
+
+/// A spherical model's pose from a scene view of it: the median of the points moved by the
+/// model's radius against their normals (normals face the camera, out of a convex part).
+bool sphereCentre(const SceneData& s, const ModelMatcher::ModelIndex& m, Eigen::Isometry3f* T) {
+  const auto& fp = m.fine->points;
+  const auto& sp = s.coarse.points;
+  const auto& sn = s.coarse.normals;
+  if (fp.empty() || sp.size() < 3 || sn.size() != sp.size()) return false;
+  const Vec3 c = m.centroid.cast<float>();
+  double r = 0;
+  for (const auto& p : fp) r += (p - c).norm();
+  r /= static_cast<double>(fp.size());
+  std::array<std::vector<float>, 3> xyz;
+  for (size_t i = 0; i < sp.size(); ++i) {
+    if (!sp[i].allFinite() || !sn[i].allFinite()) continue;
+    const Vec3 q = sp[i] - static_cast<float>(r) * sn[i];
+    for (int k = 0; k < 3; ++k) xyz[k].push_back(q[k]);
+  }
+  if (xyz[0].size() < 3) return false;
+  Vec3 centre;
+  for (int k = 0; k < 3; ++k) {
+    auto& v = xyz[k];
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    centre[k] = v[v.size() / 2];
+  }
+  *T = Eigen::Isometry3f::Identity();
+  T->translation() = centre - c;
   return true;
 }
 
@@ -119,6 +149,13 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
     d.iterations = o.iterations;
   } else {
     candidates = ransac(s, m, correspondences(s, m, cfg), cfg, seed, &d.iterations);
+  }
+  // a sphere's pose is its centre, and every point of it, with its normal, points there (on a
+  // sphere every pair of a given distance has the same feature: votes do not tell poses apart,
+  // and a small cap may get no pose from them at all)
+  if (m.info.symmetry.type == Symmetry::Type::kSpherical) {
+    Hypothesis h;
+    if (sphereCentre(s, m, &h.T)) candidates.insert(candidates.begin(), h);
   }
   d.coarse_seconds = seconds(t_coarse);
   const auto t_refine = Clock::now();
