@@ -387,9 +387,9 @@ LearnedDescriptor::LearnedDescriptor(const DescriptorNetConfig& config, uint64_t
     if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) f(1);
     // libtorch allocates fresh buffers of a few MB in every forward pass; glibc maps blocks above
     // its mmap threshold afresh and returns freed ones to the system, so every pass page-faults
-    // them in again (on a virtual machine 60 % of a 4 096-point pass). Freed blocks up to 256 MB
-    // are kept for reuse instead, and the heap grows 64 MB at a time: about the same peak
-    // memory, a 2x faster pass (bench_descriptor).
+    // them in again (on the project's virtual machine about half of a 4 096-point pass). Freed
+    // blocks up to 256 MB are kept for reuse instead, and the heap grows 64 MB at a time: the
+    // same peak memory, 72 -> 34 ms for that pass (bench_descriptor, ab3a9c4).
     mallopt(M_MMAP_THRESHOLD, 256 << 20);
     mallopt(M_TRIM_THRESHOLD, 512 << 20);
     mallopt(M_TOP_PAD, 64 << 20);
