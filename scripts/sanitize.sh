@@ -19,7 +19,7 @@ TESTS="test_common test_sim test_scanner test_localization test_eval test_scanne
 # SANITIZE_ALL=1. A new test runs unless named here.
 SLOW_MATCHING="ModelMatching.FindsEach*:ModelMatching.Occlusion*:ModelMatching.Unconstrained*"
 SLOW_MATCHING+=":ModelMatching.SupportPlane*:ModelMatching.FinePpf*:ModelMatching.BadInput*"
-SLOW_MATCHING+=":ModelMatching.Centring*:ModelMatching.TwoTouching*:ModelMatchingRealData.*"
+SLOW_MATCHING+=":ModelMatching.Centring*:ModelMatching.TwoTouching*:ModelMatching.NearTies*:ModelMatchingRealData.*"
 SLOW_MATCHING+=":LearnedDescriptor.ClusterTooLarge*"
 filter() {
   [ "${SANITIZE_ALL:-0}" = 1 ] && return 0

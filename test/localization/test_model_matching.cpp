@@ -330,6 +330,21 @@ TEST(ModelMatching, TheTopOfASphereGivesItsCentre) {
   EXPECT_LT(r.error.translation, 0.5e-3);
 }
 
+// A housing lying on its side in generated cell 3097 (1 030 points), seen mostly by one large
+// face: many poses laying one face or another on it explain nearly every point, and the coarse
+// stage's refine_candidates best were all wrong (with refine_candidates_near 0 it is not found).
+// The near-ties past the cut are refined too, and it is found.
+TEST(ModelMatching, NearTiesPastTheCandidateCutAreRefined) {
+  const Recorded r = locateRecorded("housing_on_its_side_3097.ply", 1030, {"housing"}, "housing",
+                                    {0.47729718582777453, 0.06813112165373311, 0.02500000037252903},
+                                    {0.6071238359179957, -0.6071238359179957, -0.36249227282828894, 0.36249227282828905});
+  ASSERT_EQ(r.found.size(), 1u);
+  std::printf("housing on its side: %.3f mm %.3f deg, fitness %.2f\n", r.error.translation * 1e3, r.error.rotation * 180 / M_PI,
+              r.found[0].fitness);
+  EXPECT_LT(r.error.translation, 1e-3);
+  EXPECT_LT(r.error.rotation, 1 * M_PI / 180);
+}
+
 // Fine PPF bins make the key range too large for the table's dense index (> 2^24 keys): the
 // table falls back to searching its sorted keys and must find the same part.
 TEST(ModelMatching, FinePpfBinsUseTheSearchedTable) {
@@ -380,6 +395,8 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("min_fitness"), std::string::npos);
   std::ofstream(path) << "ppf_max_bucket: 0\n";
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("ppf_max_bucket"), std::string::npos);
+  std::ofstream(path) << "refine_candidates_near: 1.2\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("refine_candidates_near"), std::string::npos);
 }
 
 namespace {

@@ -64,6 +64,10 @@ struct MatchingConfig {
   double normal_tolerance = 0.5;   ///< rad, pre-rejection normal consistency
   double inlier_distance = 0.003;  ///< m, coarse inlier threshold (≈ 1.5 voxel)
   int refine_candidates = 6;       ///< distinct coarse hypotheses refined by ICP per model
+  /// PPF: distinct poses beyond refine_candidates are refined too while their coarse score is
+  /// at least this share of the best, up to twice refine_candidates (a part seen mostly by one
+  /// flat face: many poses explain nearly every point, and the cut would fall among them). 0: off.
+  double refine_candidates_near = 0.95;
   double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
   int icp_iterations = 40;
   double icp_max_points = 4000;    ///< scene points used by the final ICP (thinned evenly above this)

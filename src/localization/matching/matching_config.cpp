@@ -91,6 +91,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("normal_tolerance", c.normal_tolerance);
   positive("inlier_distance", c.inlier_distance);
   atLeast("refine_candidates", c.refine_candidates, 1);
+  share("refine_candidates_near", c.refine_candidates_near);
   positive("icp_spacing", c.icp_spacing);
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);

@@ -269,7 +269,12 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
     if (!merged) top.push_back(v);
   }
   std::sort(top.begin(), top.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
-  if (top.size() > keep) top.resize(keep);
+  // near-ties past the cut are kept too (a flat face explains nearly every point in many poses)
+  size_t n = std::min(keep, top.size());
+  while (cfg.refine_candidates_near > 0 && n < top.size() && n < 2 * keep &&
+         top[n].score >= cfg.refine_candidates_near * top[0].score)
+    ++n;
+  top.resize(n);
   return top;
 }
 
