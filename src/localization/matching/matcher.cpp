@@ -181,8 +181,8 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   });
   // near-equal fitness does not tell a pose that converged from one that stopped a degree off:
   // the best kPolished are polished, and an accepted one beats a better-scored refused one;
-  // while none is accepted the next ones are polished too (two screened poses in one wrong
-  // basin, a degree apart, can hide a right one ranked third)
+  // while none is accepted the next ones are polished too (the best two can be one wrong pose
+  // reached twice, hiding a right one ranked third)
   PartDetection fine = d;
   for (size_t k = 0; k < screened.size() && (k < kPolished || !accepted(fine, cfg)); ++k) {
     if (k > 0 && !clear(screened[k])) break;
