@@ -18,6 +18,8 @@
 #include "cellsight/common/scan_cloud.hpp"
 #include "cellsight/GraspPlan.h"
 #include "cellsight/LaserPlaneStamped.h"
+#include "cellsight/LaserSweep.h"
+#include "cellsight/localization/light_sweep.hpp"
 #include "cellsight/planning/grasp_planner.hpp"
 
 namespace cellsight_ros {
@@ -32,6 +34,11 @@ geometry_msgs::TransformStamped toTransformStamped(const cellsight::TransformCal
 cellsight::LaserPlaneStamped toPlaneMsg(const cellsight::Plane& plane, const std::string& frame,
                                         const ros::Time& stamp);
 cellsight::Plane fromPlaneMsg(const cellsight::LaserPlaneStamped& msg);
+/// One scan's light sheets (frames in time order) as a message, and back. fromLaserSweepMsg
+/// throws std::invalid_argument naming the problem: arrays of different lengths, a non-finite
+/// value, a normal that is not unit length.
+cellsight::LaserSweep toLaserSweepMsg(const cellsight::LightSweep& sweep, const std::string& frame, const ros::Time& stamp);
+cellsight::LightSweep fromLaserSweepMsg(const cellsight::LaserSweep& msg);
 
 sensor_msgs::CameraInfo toCameraInfo(const cellsight::CameraIntrinsics& cam,
                                      const std::string& frame, const ros::Time& stamp);

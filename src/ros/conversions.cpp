@@ -89,6 +89,42 @@ cellsight::Plane fromPlaneMsg(const cellsight::LaserPlaneStamped& m) {
   return p;
 }
 
+cellsight::LaserSweep toLaserSweepMsg(const cellsight::LightSweep& sweep, const std::string& frame, const ros::Time& stamp) {
+  cellsight::LaserSweep m;
+  m.header.frame_id = frame;
+  m.header.stamp = stamp;
+  for (size_t k = 0; k < sweep.size(); ++k) {
+    geometry_msgs::Point e;
+    e.x = sweep.emitter(k).x();
+    e.y = sweep.emitter(k).y();
+    e.z = sweep.emitter(k).z();
+    geometry_msgs::Vector3 n;
+    n.x = sweep.normal(k).x();
+    n.y = sweep.normal(k).y();
+    n.z = sweep.normal(k).z();
+    m.emitters.push_back(e);
+    m.normals.push_back(n);
+    m.offsets.push_back(sweep.offset(k));
+  }
+  return m;
+}
+
+cellsight::LightSweep fromLaserSweepMsg(const cellsight::LaserSweep& m) {
+  if (m.emitters.size() != m.normals.size() || m.emitters.size() != m.offsets.size()) {
+    throw std::invalid_argument("laser sweep: " + std::to_string(m.emitters.size()) + " emitters, " +
+                                std::to_string(m.normals.size()) + " normals and " + std::to_string(m.offsets.size()) +
+                                " offsets: the arrays must have one entry per frame");
+  }
+  cellsight::LightSweep s;
+  for (size_t k = 0; k < m.emitters.size(); ++k) {
+    const auto& e = m.emitters[k];
+    const auto& n = m.normals[k];
+    s.add(Eigen::Vector3d(e.x, e.y, e.z).cast<float>(), Eigen::Vector3d(n.x, n.y, n.z).cast<float>(),
+          static_cast<float>(m.offsets[k]));  // throws naming the frame
+  }
+  return s;
+}
+
 sensor_msgs::CameraInfo toCameraInfo(const cellsight::CameraIntrinsics& c,
                                      const std::string& frame, const ros::Time& stamp) {
   sensor_msgs::CameraInfo ci;

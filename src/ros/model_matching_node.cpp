@@ -3,7 +3,9 @@
 // where it was; re-published at ~frame_rate so tf never runs out of them), mesh markers for rviz, and the
 // ~locate_objects service (cellsight/LocateObjects) on the latest clusters. The viewpoint of the
 // visible-surface check is the scanner camera, looked up in tf at the clusters' stamp; without
-// that transform the clusters are dropped with the reason (never an identity).
+// that transform the clusters are dropped with the reason (never an identity). The scan's light
+// sheet (scan/light_sweep, from triangulation, the clusters' stamp) adds the illumination test;
+// without it the fitness counts every camera-visible point, with a warning.
 #include <dynamic_reconfigure/server.h>
 #include <geometry_msgs/TransformStamped.h>
 #include <ros/ros.h>
@@ -26,6 +28,7 @@
 
 #include "cellsight/ClusterArray.h"
 #include "cellsight/DetectionArray.h"
+#include "cellsight/LaserSweep.h"
 #include "cellsight/LocateObjects.h"
 #include "cellsight/MatchingAcceptanceConfig.h"
 #include "cellsight/common/file_io.hpp"
@@ -88,6 +91,7 @@ class ModelMatching {
              config_.model_cache_dir.empty() ? "no folder" : config_.model_cache_dir.c_str());
     detections_pub_ = nh.advertise<cellsight::DetectionArray>("detections", 1, true);
     markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("detections/markers", 1, true);
+    sweep_sub_ = nh.subscribe("scan/light_sweep", 4, &ModelMatching::onSweep, this);
     clusters_sub_ = nh.subscribe("clusters", 1, &ModelMatching::onClusters, this);
     service_ = pnh.advertiseService("locate_objects", &ModelMatching::onLocate, this);
     // the settings file's acceptance thresholds are the starting values of ~ (rqt_reconfigure)
@@ -111,6 +115,38 @@ class ModelMatching {
       ROS_ERROR("model_matching: reconfigure refused: %s; the running thresholds stay", e.what());
       cellsight::copyAcceptance(cellsight::acceptanceOf(matcher_->config()), &c);
     }
+  }
+
+  /// The light sheets of the latest scans, for the clusters that carry the same stamp.
+  void onSweep(const cellsight::LaserSweepConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    sweeps_.push_back(msg);
+    if (sweeps_.size() > 4) sweeps_.erase(sweeps_.begin());
+  }
+
+  /// The sweep of the scan the clusters came from (same stamp and frame), or a warning why none.
+  std::unique_ptr<cellsight::LightSweep> sweepFor(const cellsight::ClusterArray& msg, std::vector<std::string>* warnings) {
+    cellsight::LaserSweepConstPtr found;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      for (const auto& s : sweeps_)
+        if (s->header.stamp == msg.header.stamp) found = s;
+    }
+    std::string why;
+    if (!found) {
+      why = "no " + sweep_sub_.getTopic() + " with the clusters' stamp (is triangulation publishing it?)";
+    } else if (found->header.frame_id != msg.header.frame_id) {
+      why = sweep_sub_.getTopic() + " in '" + found->header.frame_id + "', the clusters in '" + msg.header.frame_id + "'";
+    } else {
+      try {
+        return std::make_unique<cellsight::LightSweep>(cellsight_ros::fromLaserSweepMsg(*found));
+      } catch (const std::exception& e) {
+        why = sweep_sub_.getTopic() + " unusable: " + e.what();
+      }
+    }
+    warnings->push_back(why + ": fitness counts every camera-visible point, lit or not");
+    ROS_WARN_THROTTLE(10.0, "model_matching: %s: fitness counts every camera-visible point, lit or not", why.c_str());
+    return nullptr;
   }
 
   void onClusters(const cellsight::ClusterArrayConstPtr& msg) {
@@ -190,8 +226,10 @@ class ModelMatching {
         out->warnings.push_back(std::string("support_points unreadable, no free-space test: ") + e.what());
       }
     }
+    const std::unique_ptr<cellsight::LightSweep> light =
+        matcher_->config().check_illumination ? sweepFor(msg, &out->warnings) : nullptr;
     const auto dets = matcher_->locate(clusters, models, &stats, &eye, use_support ? &support : nullptr,
-                                       seen.empty() ? nullptr : &seen);
+                                       seen.empty() ? nullptr : &seen, light.get());
     out->header = msg.header;
     out->clusters = static_cast<uint32_t>(clusters.size());
     out->locate_seconds = stats.seconds;
@@ -349,7 +387,8 @@ class ModelMatching {
   tf2_ros::TransformListener listener_;
   tf2_ros::TransformBroadcaster broadcaster_;
   ros::Publisher detections_pub_, markers_pub_;
-  ros::Subscriber clusters_sub_;
+  ros::Subscriber clusters_sub_, sweep_sub_;
+  std::vector<cellsight::LaserSweepConstPtr> sweeps_;  // the latest few, oldest first
   ros::ServiceServer service_;
   std::mutex mutex_;
   cellsight::ClusterArrayConstPtr latest_;

@@ -13,6 +13,7 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
+#include <algorithm>
 #include <condition_variable>
 #include <deque>
 #include <mutex>
@@ -49,10 +50,12 @@ class Triangulation {
     has_workspace_ = settings.has_workspace;
     workspace_ = settings.workspace;
     cellsight_ros::param(pnh, "base_frame", base_frame_);
+    cellsight_ros::param(pnh, "laser_frame", laser_frame_);
     info_sub_ = nh.subscribe("scanner_camera/camera_info", 5, &Triangulation::onInfo, this);
     sync_.registerCallback(&Triangulation::onFrame, this);
     profile_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/profile", 20);
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/cloud", 1, true);
+    sweep_pub_ = nh.advertise<cellsight::LaserSweep>("scan/light_sweep", 1, true);
     reset_srv_ = nh.advertiseService("scan/reset", &Triangulation::onReset, this);
     finish_srv_ = nh.advertiseService("scan/finish", &Triangulation::onFinish, this);
     // the settings file's thresholds are the starting values of ~ (rqt_reconfigure)
@@ -186,6 +189,17 @@ class Triangulation {
       return;
     }
     const Eigen::Isometry3d T_base_camera = cellsight_ros::fromTransformMsg(T.transform);
+    // where the sheet came from (the matcher's illumination test): the laser frame at this stamp
+    bool lit = false;
+    Eigen::Isometry3d T_base_laser;
+    try {
+      T_base_laser = cellsight_ros::fromTransformMsg(
+          buffer_.lookupTransform(base_frame_, laser_frame_, image->header.stamp, ros::Duration(0.05)).transform);
+      lit = true;
+    } catch (const tf2::TransformException& e) {
+      ROS_WARN_THROTTLE(5.0, "triangulation: no %s -> %s at %.6f (%s): this frame is left out of scan/light_sweep",
+                        base_frame_.c_str(), laser_frame_.c_str(), image->header.stamp.toSec(), e.what());
+    }
     const cellsight::Plane plane = cellsight_ros::fromPlaneMsg(*plane_msg);
     // The sheet's trace on the image decides the search direction (rows or columns).
     lc.line_along_rows = cellsight::lineAlongRows(plane);
@@ -205,6 +219,7 @@ class Triangulation {
     camera_center_ = T_base_camera.translation().cast<float>();
     if (image->header.stamp > last_stamp_) last_stamp_ = image->header.stamp;
     for (size_t i = 0; i < profile.size(); ++i) scan_.append(profile.points[i], profile.intensity[i]);
+    if (lit) sweep_.emplace_back(image->header.stamp, T_base_laser);
   }
 
   bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
@@ -214,6 +229,7 @@ class Triangulation {
     frames_ = 0;
     last_stamp_ = ros::Time();
     held_.clear();
+    sweep_.clear();
     res.success = true;
     res.message = "scan cleared";
     return true;
@@ -223,6 +239,7 @@ class Triangulation {
     cellsight::ScanCloud cloud;
     Eigen::Vector3f viewpoint;
     ros::Time stamp;
+    std::vector<std::pair<ros::Time, Eigen::Isometry3d>> sweep;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       if (req.expected_frames > 0) {
@@ -238,6 +255,7 @@ class Triangulation {
         }
       }
       cloud = scan_;
+      sweep = sweep_;
       viewpoint = camera_center_;
       stamp = last_stamp_;
       res.frames = frames_;
@@ -256,6 +274,15 @@ class Triangulation {
     // the scan is as old as its last frame: consumers look transforms up at that stamp
     res.cloud = cellsight_ros::toCloudMsg(cloud, stamp);
     res.points = static_cast<uint32_t>(cloud.size());
+    // the sheet frame by frame in time order, with the cloud's stamp; sent first, so that it is
+    // there when the clusters of this cloud reach the matcher
+    std::sort(sweep.begin(), sweep.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    cellsight::LightSweep light;
+    for (const auto& f : sweep) {
+      const cellsight::Plane sheet = cellsight::laserPlane(f.second);
+      light.add(f.second.translation().cast<float>(), sheet.n.cast<float>(), static_cast<float>(sheet.d));
+    }
+    sweep_pub_.publish(cellsight_ros::toLaserSweepMsg(light, base_frame_, stamp));
     cloud_pub_.publish(res.cloud);
     if (!req.output_file.empty()) {
       try {
@@ -279,6 +306,7 @@ class Triangulation {
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<cellsight::ScannerLineConfig>> reconfigure_;
   std::string base_frame_ = "base_link";
+  std::string laser_frame_ = "laser";
   int outlier_k_ = 20;
   double outlier_std_ = 3.0;
   int normal_k_ = 15;
@@ -291,7 +319,7 @@ class Triangulation {
   message_filters::Subscriber<cellsight::LaserPlaneStamped> plane_sub_;
   message_filters::TimeSynchronizer<sensor_msgs::Image, cellsight::LaserPlaneStamped> sync_;
   ros::Subscriber info_sub_;
-  ros::Publisher profile_pub_, cloud_pub_;
+  ros::Publisher profile_pub_, cloud_pub_, sweep_pub_;
   ros::ServiceServer reset_srv_, finish_srv_;
   std::mutex mutex_;
   std::condition_variable cv_;
@@ -302,6 +330,7 @@ class Triangulation {
   cellsight::ScanCloud scan_;
   uint32_t frames_ = 0;
   ros::Time last_stamp_;  // newest frame in scan_
+  std::vector<std::pair<ros::Time, Eigen::Isometry3d>> sweep_;  // T_base_laser of scan_'s frames
   Eigen::Vector3f camera_center_ = Eigen::Vector3f::Zero();
 };
 

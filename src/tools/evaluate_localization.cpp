@@ -376,7 +376,7 @@ int runDemo(const Options& o) {
 /// scored against the scene's truth.
 json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibrary& lib, ModelMatcher& matcher,
                     const ClusteringConfig& ccfg, const Options& o, DetectionCounts* counts, std::vector<double>* terr,
-                    std::vector<double>* rerr) {
+                    std::vector<double>* rerr, const LightSweep* light = nullptr) {
   const ClusteringResult cr = clusterScene(cloud, ccfg);
   std::vector<ScanCloud> clusters;
   for (const auto& c : cr.clusters) clusters.push_back(c.cloud);
@@ -389,7 +389,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
                                 static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
   MatchStats st;
-  const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr, &cr.support_points);
+  const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, light);
   std::vector<ScoredDetection> dets;
   for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through});
   json sj = scoreDetections(scene, lib, matcher, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, counts, terr, rerr);
@@ -474,7 +474,10 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
     cloud = statisticalOutlierRemoval(cloud, settings.outlier_k, settings.outlier_std);
     DetectionCounts counts;
     std::vector<double> t1, r1;
-    json sj = locateAndScore(g.scene, cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1);
+    // the light sheet frame by frame, as the scanner knows it: the poses the robot reported and
+    // the calibrated flange → laser transform
+    const LightSweep light = LightSweep::fromFlangePoses(sweep.poses, cal.T_flange_laser);
+    json sj = locateAndScore(g.scene, cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1, &light);
     sj["seed"] = seed;
     sj["scene"] = g.file;
     std::vector<Eigen::Vector3d> pts;

@@ -345,6 +345,54 @@ TEST(ModelMatching, NearTiesPastTheCandidateCutAreRefined) {
   EXPECT_LT(r.error.rotation, 1 * M_PI / 180);
 }
 
+// A light sheet from the side lights only part of what the camera sees of a bracket; the scan
+// holds the lit points. Given the sweep, the fitness counts the model points the sheet could
+// reach, and explains the scan; without it, the unlit faces count as missing.
+TEST(ModelMatching, FitnessCountsOnlyWhatTheSheetLit) {
+  const TriangleMesh& mesh = library()->model("bracket").mesh;
+  const Eigen::Isometry3d truth = onTable(0.5, 0.0, 0.6);
+  // the sheet x = const sweeps along x; its emitter 0.35 m to the -y side, 0.1 m up
+  LightSweep sweep;
+  for (int k = 0; k <= 200; ++k) {
+    const float x = 0.40f + 0.001f * k;
+    sweep.add({x, -0.35f, 0.10f}, Eigen::Vector3f::UnitX(), -x);
+  }
+  const ScanCloud view = singleViewCloud(mesh, truth, kEye, 0.001, 2e-5, 5);
+  RayCaster part;
+  part.addMesh(mesh, truth);
+  part.commit();
+  ScanCloud lit;
+  for (size_t i = 0; i < view.size(); ++i) {
+    Eigen::Vector3f e;
+    if (!sweep.emitterFor(view.points[i], &e)) continue;
+    const Eigen::Vector3f beam = view.points[i] - e;
+    const float along = beam.norm();
+    if (part.occluded(e, beam / along, 0.f, along - 0.0005f)) continue;
+    lit.append(view.points[i], 0.f);
+  }
+  ASSERT_GT(lit.size(), 300u);
+  ASSERT_LT(lit.size(), view.size() * 8 / 10) << "the sheet should leave a good share of the view dark";
+  MatchingConfig c = config();
+  c.min_fitness = 0.05;  // both found: the figures are compared
+  ModelMatcher m(library(), c);
+  const auto without = m.locate({lit}, {"bracket"});
+  const auto with = m.locate({lit}, {"bracket"}, nullptr, nullptr, nullptr, nullptr, &sweep);
+  ASSERT_EQ(without.size(), 1u);
+  ASSERT_EQ(with.size(), 1u);
+  const PoseError e = poseError(library()->model("bracket").info, m.centroid("bracket"), with[0].pose, truth);
+  std::printf("bracket lit from the side: %zu of %zu visible points lit; fitness %.2f with the sweep, %.2f without\n",
+              lit.size(), view.size(), with[0].fitness, without[0].fitness);
+  EXPECT_LT(e.translation, 1e-3);
+  EXPECT_GT(with[0].fitness, 0.85);
+  EXPECT_LT(without[0].fitness, with[0].fitness - 0.15);
+  // check_illumination off: the sweep is not used
+  c.check_illumination = false;
+  ModelMatcher off(library(), c);
+  const auto ignored = off.locate({lit}, {"bracket"}, nullptr, nullptr, nullptr, nullptr, &sweep);
+  ASSERT_EQ(ignored.size(), 1u);
+  EXPECT_NEAR(ignored[0].fitness, without[0].fitness, 0.02);
+}
+
 // Fine PPF bins make the key range too large for the table's dense index (> 2^24 keys): the
 // table falls back to searching its sorted keys and must find the same part.
 TEST(ModelMatching, FinePpfBinsUseTheSearchedTable) {

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <functional>
+#include <limits>
 
 #include "cellsight_ros/conversions.hpp"
 
@@ -37,6 +38,32 @@ TEST(Conversions, PlaneAndCameraInfoRoundTrip) {
   broken = ci;
   broken.distortion_model = "equidistant";
   EXPECT_THROW(fromCameraInfo(broken), std::invalid_argument);
+}
+
+TEST(Conversions, LaserSweepRoundTripAndRefusals) {
+  cellsight::LightSweep s;
+  for (int k = 0; k < 3; ++k) s.add({0.01f * k, 0.2f, 0.5f}, Eigen::Vector3f(0.f, 0.6f, 0.8f), -0.1f * k);
+  const cellsight::LaserSweep m = toLaserSweepMsg(s, "base_link", ros::Time(5, 0));
+  EXPECT_EQ(m.header.frame_id, "base_link");
+  const cellsight::LightSweep back = fromLaserSweepMsg(m);
+  ASSERT_EQ(back.size(), 3u);
+  EXPECT_TRUE(back.emitter(2).isApprox(s.emitter(2)));
+  EXPECT_TRUE(back.normal(1).isApprox(s.normal(1)));
+  EXPECT_FLOAT_EQ(back.offset(2), -0.2f);
+  auto shorter = m;
+  shorter.offsets.pop_back();
+  try {
+    fromLaserSweepMsg(shorter);
+    FAIL() << "arrays of different lengths were taken";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("one entry per frame"), std::string::npos) << e.what();
+  }
+  auto bad = m;
+  bad.normals[1].x = 3;
+  EXPECT_THROW(fromLaserSweepMsg(bad), std::invalid_argument);
+  bad = m;
+  bad.emitters[0].z = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(fromLaserSweepMsg(bad), std::invalid_argument);
 }
 
 TEST(Conversions, ImageMessage) {

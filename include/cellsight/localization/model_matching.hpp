@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "cellsight/localization/learned_descriptor.hpp"
+#include "cellsight/localization/light_sweep.hpp"
 #include "cellsight/localization/model_library.hpp"
 #include "cellsight/common/scan_cloud.hpp"
 
@@ -114,6 +115,10 @@ struct MatchingConfig {
   double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)
   double max_rmse = 0.0015;        ///< m, point-to-plane RMS of the inliers
   bool check_visibility = true;    ///< fitness over points the viewpoint can see
+  /// With a LightSweep given to locate() or refine(), "visible" asks also that the light sheet
+  /// reached the point: facing the emitter within max_view_angle, not shadowed by the part
+  /// itself. A part lying on its side shadows most of what the camera sees of it.
+  bool check_illumination = true;
   /// Fitness counts scan points of every cluster of the locate() call (false: only the matched
   /// cluster's): a part that clustering split is not short of its own points.
   bool fitness_whole_scan = true;
@@ -229,10 +234,13 @@ class ModelMatcher {
   /// discards poses that sink the model into the support or float above it (see
   /// max_support_penetration, max_support_gap). `support_points` (scene frame), the points of
   /// the support the scan saw, with the plane, turn on the free-space test (max_see_through).
+  /// `light` (scene frame), the scan's light sheet frame by frame, turns on the illumination
+  /// test of the fitness (check_illumination).
   std::vector<PartDetection> locate(const std::vector<ScanCloud>& clusters, const std::vector<std::string>& models,
                                 MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
                                 const Eigen::Vector4f* support_plane = nullptr,
-                                const std::vector<Eigen::Vector3f>* support_points = nullptr) const;
+                                const std::vector<Eigen::Vector3f>* support_points = nullptr,
+                                const LightSweep* light = nullptr) const;
 
   /// Refines located parts (poses as locate() gives them) on another scan of the same cell, its
   /// points above the support (e.g. the clusters of clusterScene, joined): a second pass, e.g.
@@ -243,10 +251,11 @@ class ModelMatcher {
   /// accepted, or that would move a model point more than refine_max_shift (its symmetry taken
   /// out) keeps its pose, and a warning in `stats` says why. Returns `parts` in order (`refined`
   /// set where moved).
-  /// `viewpoint`, `support_plane`: as for locate(). Unknown model ids throw std::out_of_range.
+  /// `viewpoint`, `support_plane`, `light` (this scan's): as for locate(). Unknown model ids
+  /// throw std::out_of_range.
   std::vector<PartDetection> refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,
                                     MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
-                                    const Eigen::Vector4f* support_plane = nullptr) const;
+                                    const Eigen::Vector4f* support_plane = nullptr, const LightSweep* light = nullptr) const;
 
   /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
   /// first locate(); unknown ids throw std::out_of_range.

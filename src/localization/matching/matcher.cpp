@@ -380,7 +380,7 @@ Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return 
 std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
                                             const std::vector<std::string>& models_in, MatchStats* stats,
                                             const Eigen::Vector3f* viewpoint, const Eigen::Vector4f* support_plane,
-                                            const std::vector<Eigen::Vector3f>* support_points) const {
+                                            const std::vector<Eigen::Vector3f>* support_points, const LightSweep* light) const {
   const auto t0 = Clock::now();
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
@@ -439,6 +439,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       const auto t = Clock::now();
       round[i].scene = prepareScene(round[i].points, cfg);
       round[i].scene->support_seen = &seen;
+      if (light && cfg.check_illumination && !light->empty()) round[i].scene->light = light;
       if (whole.size() > 0) round[i].scene->whole = &whole;
       if (learned_ && cfg.descriptor == "learned" && round[i].scene->coarse.size() >= 3) {
         const auto td = Clock::now();
@@ -564,7 +565,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
 
 std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,
                                                MatchStats* stats, const Eigen::Vector3f* viewpoint,
-                                               const Eigen::Vector4f* support_plane) const {
+                                               const Eigen::Vector4f* support_plane, const LightSweep* light) const {
   const auto t0 = Clock::now();
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
@@ -627,6 +628,7 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
     const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
     if (points[i].size() > cap) points[i] = capPoints(points[i], cfg.icp_spacing, cap);
     const std::unique_ptr<SceneData> sd = prepareScene(points[i], cfg);
+    if (light && cfg.check_illumination && !light->empty()) sd->light = light;
     const Eigen::Isometry3f T0 = parts[i].pose.cast<float>();
     PartDetection r;
     const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));

@@ -120,6 +120,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   share("min_coverage", c.min_coverage);
   positive("max_rmse", c.max_rmse);
   c.check_visibility = m.getBool("check_visibility", c.check_visibility);
+  c.check_illumination = m.getBool("check_illumination", c.check_illumination);
   if (m.has("viewpoint")) c.viewpoint = m.getVector3("viewpoint").cast<float>();
   positive("max_view_angle", c.max_view_angle);
   positive("max_support_penetration", c.max_support_penetration);

@@ -180,6 +180,7 @@ struct ScenePlane {
 struct SceneData {
   ScenePlane plane;
   const SupportSeen* support_seen = nullptr;  // shared by the clusters of one locate() call
+  const LightSweep* light = nullptr;          // the scan's sheet (null: camera visibility only)
   /// every cluster's points (shared by the clusters of one locate() call; null: this cluster's):
   /// the fitness test, so that a part that clustering split is not short of its own points
   const PointGrid* whole = nullptr;

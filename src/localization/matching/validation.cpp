@@ -76,6 +76,7 @@ bool SupportSeen::seenBehind(const Vec3& eye, const Vec3& p, float min_height) c
 }
 
 /// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
+/// itself) and, with s.light, lit by the sheet (facing its emitter, not shadowed by the part
 /// itself) that have a scene point within r_F (of every cluster of the call when s.whole is set).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
                       const MatchingConfig& cfg, double* see_through) {
@@ -98,6 +99,17 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
       const Vec3 dir = ray / dist;
       if (-mn[i].dot(dir) < cos_max) continue;
       if (m.has_mesh && m.caster.occluded(eye, dir, 0.f, dist - static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel)))) continue;
+      if (s.light) {
+        Vec3 emitter;
+        if (!s.light->emitterFor(T * mp[i], &emitter)) continue;  // no sheet of the sweep passed it
+        const Vec3 from = Ti * emitter;
+        const Vec3 beam = mp[i] - from;
+        const float along = beam.norm();
+        if (along <= 0) continue;
+        const Vec3 bdir = beam / along;
+        if (-mn[i].dot(bdir) < cos_max) continue;
+        if (m.has_mesh && m.caster.occluded(from, bdir, 0.f, along - static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel)))) continue;
+      }
     }
     ++visible;
     const Vec3 p = T * mp[i];

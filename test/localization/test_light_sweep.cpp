@@ -1,0 +1,83 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "cellsight/common/plane.hpp"
+#include "cellsight/localization/light_sweep.hpp"
+
+using namespace cellsight;
+
+namespace {
+
+/// A sheet x = x_k (normal +x) moving from x = 0 to 0.1 m in 1 cm steps, its emitter 0.5 m up.
+LightSweep translatingSheet() {
+  LightSweep s;
+  for (int k = 0; k <= 10; ++k) s.add({0.01f * k, 0.f, 0.5f}, Eigen::Vector3f::UnitX(), -0.01f * k);
+  return s;
+}
+
+}  // namespace
+
+TEST(LightSweep, EmitterOfTheSheetThroughAPoint) {
+  const LightSweep s = translatingSheet();
+  Eigen::Vector3f e;
+  // between frames 3 and 4: the emitter interpolated to where the sheet crossed the point
+  ASSERT_TRUE(s.emitterFor({0.035f, 0.02f, 0.f}, &e));
+  EXPECT_NEAR(e.x(), 0.035f, 1e-6f);
+  EXPECT_NEAR(e.z(), 0.5f, 1e-6f);
+  // on a frame's sheet, and on the first and the last
+  for (const float x : {0.f, 0.06f, 0.1f}) {
+    ASSERT_TRUE(s.emitterFor({x, -0.01f, 0.02f}, &e)) << x;
+    EXPECT_NEAR(e.x(), x, 1e-6f);
+  }
+  // the sheet never passed points before the first frame or after the last
+  EXPECT_FALSE(s.emitterFor({-0.001f, 0.f, 0.f}, &e));
+  EXPECT_FALSE(s.emitterFor({0.2f, 0.f, 0.f}, &e));
+  // the same sweep run backwards gives the same emitter
+  LightSweep back;
+  for (int k = 10; k >= 0; --k) back.add({0.01f * k, 0.f, 0.5f}, Eigen::Vector3f::UnitX(), -0.01f * k);
+  ASSERT_TRUE(back.emitterFor({0.035f, 0.02f, 0.f}, &e));
+  EXPECT_NEAR(e.x(), 0.035f, 1e-6f);
+}
+
+TEST(LightSweep, FromFlangePosesUsesTheLaserFrame) {
+  // laser frame: origin at the emitter, the sheet its y = 0 plane
+  Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
+  T_flange_laser.translation() = Eigen::Vector3d(0, 0.06, 0.04);
+  T_flange_laser.linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> flange;
+  for (int k = 0; k < 20; ++k) {
+    Eigen::Isometry3d F = Eigen::Isometry3d::Identity();
+    F.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();  // tool down
+    F.translation() = Eigen::Vector3d(0.5, -0.1 + 0.01 * k, 0.4);
+    flange.push_back(F);
+  }
+  const LightSweep s = LightSweep::fromFlangePoses(flange, T_flange_laser);
+  ASSERT_EQ(s.size(), 20u);
+  // a point on frame 7's sheet, on the table: lit from frame 7's emitter
+  const Eigen::Isometry3d L7 = flange[7] * T_flange_laser;
+  const Plane sheet = laserPlane(L7);
+  const Eigen::Vector3d beam = L7.linear().col(2);  // the central beam, in the sheet
+  const Eigen::Vector3d p = L7.translation() + beam * ((0.0 - L7.translation().z()) / beam.z());
+  ASSERT_NEAR(sheet.distance(p), 0.0, 1e-9);
+  Eigen::Vector3f e;
+  ASSERT_TRUE(s.emitterFor(p.cast<float>(), &e));
+  EXPECT_LT((e.cast<double>() - L7.translation()).norm(), 1e-5);
+}
+
+TEST(LightSweep, BadFramesAreRefusedAndShortSweepsLightNothing) {
+  LightSweep s;
+  Eigen::Vector3f e;
+  EXPECT_FALSE(s.emitterFor(Eigen::Vector3f::Zero(), &e));
+  s.add(Eigen::Vector3f::Zero(), Eigen::Vector3f::UnitX(), 0.f);
+  EXPECT_FALSE(s.emitterFor(Eigen::Vector3f::Zero(), &e)) << "one frame brackets nothing";
+  try {
+    s.add(Eigen::Vector3f::Zero(), Eigen::Vector3f(2.f, 0.f, 0.f), 0.f);
+    FAIL() << "a normal of length 2 was taken";
+  } catch (const std::invalid_argument& ex) {
+    EXPECT_NE(std::string(ex.what()).find("unit length"), std::string::npos) << ex.what();
+  }
+  EXPECT_THROW(s.add(Eigen::Vector3f::Constant(NAN), Eigen::Vector3f::UnitX(), 0.f), std::invalid_argument);
+  EXPECT_THROW(s.add(Eigen::Vector3f::Zero(), Eigen::Vector3f::UnitX(), INFINITY), std::invalid_argument);
+  EXPECT_EQ(s.size(), 1u);
+}
