@@ -126,7 +126,9 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
   const Eigen::Vector3f eye = m.cal.T_base_camera.translation().cast<float>();
   const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
                                 static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
-  auto found = m.matcher->locate(clusters, {}, nullptr, &eye, cr.plane_found ? &support : nullptr, &cr.support_points);
+  // the sheet frame by frame as the scanner knows it (reported flange poses, calibrated laser)
+  const LightSweep light = LightSweep::fromFlangePoses(m.sweep.poses, m.cal.T_flange_laser);
+  auto found = m.matcher->locate(clusters, {}, nullptr, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, &light);
   rep.locate_seconds = now() - t0;
   if (!m.refine_sweep.poses.empty()) {
     // the second pass: its own image noise (another seed space), its own robot moves
