@@ -1,6 +1,8 @@
 // The model_matching node: the service refuses before any clusters and for an unknown model
 // (and keeps answering); a cluster holding a single view of a part gives a detection, its tf
-// frame and a correct pose; clusters in a frame with no transform are dropped, the node lives on.
+// frame and a correct pose; the scan's light sweep with the clusters' stamp is used, a missing or
+// malformed one is named in the warnings; clusters in a frame with no transform are dropped, the
+// node lives on.
 #include <gtest/gtest.h>
 
 #include <map>
@@ -15,6 +17,7 @@
 
 #include "cellsight/ClusterArray.h"
 #include "cellsight/DetectionArray.h"
+#include "cellsight/LaserSweep.h"
 #include "cellsight/LocateObjects.h"
 #include "cellsight/localization/localization_eval.hpp"
 #include "cellsight/localization/model_matching.hpp"
@@ -91,6 +94,12 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   EXPECT_LT(e.translation, 1e-3);
   EXPECT_LT(e.rotation, 1 * M_PI / 180);
   EXPECT_FALSE(det->warnings.empty());  // the all-NaN cluster is named
+  auto warned = [](const cellsight::DetectionArray& d, const std::string& what) {
+    for (const auto& w : d.warnings)
+      if (w.find(what) != std::string::npos) return true;
+    return false;
+  };
+  EXPECT_TRUE(warned(*det, "light_sweep with the clusters' stamp")) << "no sweep was published";
 
   EXPECT_EQ(det->detections[0].name, "object/bracket_0");
   EXPECT_TRUE(buffer.canTransform("base_link", "object/bracket_0", clusters.header.stamp, ros::Duration(5)));
@@ -125,6 +134,24 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   ASSERT_TRUE(locate.call(srv));
   EXPECT_EQ(srv.response.detections.detections.size(), 1u);
 
+  // the scan's light sweep with the clusters' stamp is used (no warning, the part still found);
+  // a malformed one is named and the fitness counts every visible point
+  auto sweep_pub = nh.advertise<cellsight::LaserSweep>("scan/light_sweep", 1, true);
+  cellsight::LightSweep sheet;
+  for (int k = 0; k <= 100; ++k) sheet.add({0.40f + 0.002f * k, -0.1f, 0.45f}, Eigen::Vector3f::UnitX(), -(0.40f + 0.002f * k));
+  for (const bool good : {true, false}) {
+    clusters.header.stamp = ros::Time::now();
+    cellsight::LaserSweep sm = cellsight_ros::toLaserSweepMsg(sheet, "base_link", clusters.header.stamp);
+    if (!good) sm.offsets.pop_back();
+    sweep_pub.publish(sm);
+    ros::WallDuration(0.5).sleep();
+    pub.publish(clusters);
+    const auto lit = waitForDetections(clusters.header.stamp, 60);
+    ASSERT_TRUE(lit) << "no detections for the clusters with a sweep";
+    EXPECT_EQ(lit->detections.size(), 1u);
+    EXPECT_FALSE(warned(*lit, "light_sweep with the clusters' stamp"));
+    EXPECT_EQ(warned(*lit, "unusable"), !good);
+  }
 
   // no transform for this frame: dropped (no detections for this stamp), the node keeps serving
   clusters.header.frame_id = "nowhere";
@@ -148,7 +175,7 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   }
   EXPECT_EQ(kv["dropped: no scanner camera transform at the scan's stamp"], "1");
   ASSERT_FALSE(kv["scans processed"].empty());
-  EXPECT_GE(std::stoi(kv["scans processed"]), 3);
+  EXPECT_GE(std::stoi(kv["scans processed"]), 5);
 }
 
 int main(int argc, char** argv) {
