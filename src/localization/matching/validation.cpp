@@ -91,25 +91,22 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   const float min_height = static_cast<float>(cfg.voxel);  // the lowest band: the part's own footprint
   const auto& mp = m.coarse->points;
   const auto& mn = m.coarse->normals;
+  // model point i faces `from` (model frame) within max_view_angle and the part does not hide it
+  const float margin = static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel));
+  auto reaches = [&](const Vec3& from, size_t i) {
+    const Vec3 ray = mp[i] - from;
+    const float dist = ray.norm();
+    if (dist <= 0) return false;
+    const Vec3 dir = ray / dist;
+    if (-mn[i].dot(dir) < cos_max) return false;
+    return !(m.has_mesh && m.caster.occluded(from, dir, 0.f, dist - margin));
+  };
   for (size_t i = 0; i < mp.size(); ++i) {
     if (cfg.check_visibility) {
-      const Vec3 ray = mp[i] - eye;
-      const float dist = ray.norm();
-      if (dist <= 0) continue;
-      const Vec3 dir = ray / dist;
-      if (-mn[i].dot(dir) < cos_max) continue;
-      if (m.has_mesh && m.caster.occluded(eye, dir, 0.f, dist - static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel)))) continue;
-      if (s.light) {
-        Vec3 emitter;
-        if (!s.light->emitterFor(T * mp[i], &emitter)) continue;  // no sheet of the sweep passed it
-        const Vec3 from = Ti * emitter;
-        const Vec3 beam = mp[i] - from;
-        const float along = beam.norm();
-        if (along <= 0) continue;
-        const Vec3 bdir = beam / along;
-        if (-mn[i].dot(bdir) < cos_max) continue;
-        if (m.has_mesh && m.caster.occluded(from, bdir, 0.f, along - static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel)))) continue;
-      }
+      if (!reaches(eye, i)) continue;  // the camera does not see it
+      Vec3 emitter;
+      // no sheet of the sweep passed it, or the sheet did not reach it
+      if (s.light && (!s.light->emitterFor(T * mp[i], &emitter) || !reaches(Ti * emitter, i))) continue;
     }
     ++visible;
     const Vec3 p = T * mp[i];
