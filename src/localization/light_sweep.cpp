@@ -18,15 +18,16 @@ void LightSweep::add(const Eigen::Vector3f& emitter, const Eigen::Vector3f& norm
   d_.push_back(d);
 }
 
+void LightSweep::addLaserFrame(const Eigen::Isometry3d& T_frame_laser) {
+  const Plane sheet = laserPlane(T_frame_laser);
+  add(T_frame_laser.translation().cast<float>(), sheet.n.cast<float>(), static_cast<float>(sheet.d));
+}
+
 LightSweep LightSweep::fromFlangePoses(
     const std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>>& T_base_flange,
     const Eigen::Isometry3d& T_flange_laser) {
   LightSweep s;
-  for (const auto& F : T_base_flange) {
-    const Eigen::Isometry3d L = F * T_flange_laser;
-    const Plane sheet = laserPlane(L);
-    s.add(L.translation().cast<float>(), sheet.n.cast<float>(), static_cast<float>(sheet.d));
-  }
+  for (const auto& F : T_base_flange) s.addLaserFrame(F * T_flange_laser);
   return s;
 }
 

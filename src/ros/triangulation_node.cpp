@@ -278,10 +278,7 @@ class Triangulation {
     // there when the clusters of this cloud reach the matcher
     std::sort(sweep.begin(), sweep.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     cellsight::LightSweep light;
-    for (const auto& f : sweep) {
-      const cellsight::Plane sheet = cellsight::laserPlane(f.second);
-      light.add(f.second.translation().cast<float>(), sheet.n.cast<float>(), static_cast<float>(sheet.d));
-    }
+    for (const auto& f : sweep) light.addLaserFrame(f.second);
     sweep_pub_.publish(cellsight_ros::toLaserSweepMsg(light, base_frame_, stamp));
     cloud_pub_.publish(res.cloud);
     if (!req.output_file.empty()) {

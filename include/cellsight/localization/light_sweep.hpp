@@ -13,6 +13,8 @@ class LightSweep {
   /// One frame, in time order: the sheet n·p + d = 0 (n unit) and its emitter (a point of it).
   /// Throws std::invalid_argument for a non-finite value or a normal that is not unit length.
   void add(const Eigen::Vector3f& emitter, const Eigen::Vector3f& normal, float d);
+  /// One frame from the laser frame's pose (origin at the emitter, the sheet its y = 0 plane).
+  void addLaserFrame(const Eigen::Isometry3d& T_frame_laser);
   /// The frames of a scan from the flange poses the robot reported and the calibrated
   /// flange → laser transform (laser frame: origin at the emitter, y the sheet's normal).
   static LightSweep fromFlangePoses(const std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>>& T_base_flange,

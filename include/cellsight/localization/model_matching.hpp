@@ -115,7 +115,7 @@ struct MatchingConfig {
   double min_coverage = 0.6;       ///< share of the cluster explained (0: whole-scene search)
   double max_rmse = 0.0015;        ///< m, point-to-plane RMS of the inliers
   bool check_visibility = true;    ///< fitness over points the viewpoint can see
-  /// With a LightSweep given to locate() or refine(), "visible" asks also that the light sheet
+  /// With a LightSweep given to locate(), "visible" asks also that the light sheet
   /// reached the point: facing the emitter within max_view_angle, not shadowed by the part
   /// itself. A part lying on its side shadows most of what the camera sees of it.
   bool check_illumination = true;
@@ -251,11 +251,12 @@ class ModelMatcher {
   /// accepted, or that would move a model point more than refine_max_shift (its symmetry taken
   /// out) keeps its pose, and a warning in `stats` says why. Returns `parts` in order (`refined`
   /// set where moved).
-  /// `viewpoint`, `support_plane`, `light` (this scan's): as for locate(). Unknown model ids
-  /// throw std::out_of_range.
+  /// `viewpoint`, `support_plane`: as for locate(). Unknown model ids throw std::out_of_range.
+  /// The fitness here counts every camera-visible point: the points of two passes, lit by two
+  /// sweeps, are refined together.
   std::vector<PartDetection> refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,
                                     MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
-                                    const Eigen::Vector4f* support_plane = nullptr, const LightSweep* light = nullptr) const;
+                                    const Eigen::Vector4f* support_plane = nullptr) const;
 
   /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
   /// first locate(); unknown ids throw std::out_of_range.

@@ -565,7 +565,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
 
 std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,
                                                MatchStats* stats, const Eigen::Vector3f* viewpoint,
-                                               const Eigen::Vector4f* support_plane, const LightSweep* light) const {
+                                               const Eigen::Vector4f* support_plane) const {
   const auto t0 = Clock::now();
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
@@ -628,7 +628,6 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
     const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
     if (points[i].size() > cap) points[i] = capPoints(points[i], cfg.icp_spacing, cap);
     const std::unique_ptr<SceneData> sd = prepareScene(points[i], cfg);
-    if (light && cfg.check_illumination && !light->empty()) sd->light = light;
     const Eigen::Isometry3f T0 = parts[i].pose.cast<float>();
     PartDetection r;
     const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
