@@ -1,11 +1,14 @@
 // libFuzzer target: the messages the nodes receive, through the conversions they use
 // (src/ros/conversions.cpp): PointCloud2 → fromCloudMsg (clustering, model_matching),
 // Image → fromImageMsg (triangulation, camera_trigger, scanner_calibration), CameraInfo →
-// fromCameraInfo (triangulation, laser_plane_tracker). The input is decoded field by field, so
+// fromCameraInfo (triangulation, laser_plane_tracker), LaserSweep → fromLaserSweepMsg
+// (model_matching) and the sweep's emitterFor as the fitness asks it. The input is decoded field by field, so
 // every size, offset, step and count a publisher controls is the fuzzer's; the byte payload is
 // the input's tail. A clean rejection is std::invalid_argument.
 #include <fuzzer/FuzzedDataProvider.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <stdexcept>
@@ -13,6 +16,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "cellsight/localization/light_sweep.hpp"
 #include "cellsight_ros/conversions.hpp"
 
 namespace {
@@ -75,15 +79,44 @@ void cameraInfo(FuzzedDataProvider& in) {
   cellsight_ros::fromCameraInfo(m);
 }
 
+void laserSweep(FuzzedDataProvider& in) {
+  cellsight::LaserSweep m;
+  const int n = in.ConsumeIntegralInRange<int>(0, 64);
+  const bool same_length = in.ConsumeBool();
+  for (int i = 0; i < n; ++i) {
+    geometry_msgs::Point e;
+    e.x = in.ConsumeFloatingPoint<double>();
+    e.y = in.ConsumeFloatingPoint<double>();
+    e.z = in.ConsumeFloatingPoint<double>();
+    geometry_msgs::Vector3 v;
+    v.x = in.ConsumeFloatingPoint<double>();
+    v.y = in.ConsumeFloatingPoint<double>();
+    v.z = in.ConsumeFloatingPoint<double>();
+    if (in.ConsumeBool()) v.z = std::sqrt(std::max(0.0, 1.0 - v.x * v.x - v.y * v.y));  // often unit
+    m.emitters.push_back(e);
+    m.normals.push_back(v);
+    if (same_length || in.ConsumeBool()) m.offsets.push_back(in.ConsumeFloatingPoint<double>());
+  }
+  const cellsight::LightSweep s = cellsight_ros::fromLaserSweepMsg(m);
+  if (s.size() != m.emitters.size()) abort();  // a frame dropped without a refusal
+  while (in.remaining_bytes() >= 3 * sizeof(float)) {
+    const Eigen::Vector3f p(in.ConsumeFloatingPoint<float>(), in.ConsumeFloatingPoint<float>(),
+                            in.ConsumeFloatingPoint<float>());
+    Eigen::Vector3f e;
+    s.emitterFor(p, &e);
+  }
+}
+
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   FuzzedDataProvider in(data, size);
   try {
-    switch (in.ConsumeIntegralInRange<int>(0, 2)) {
+    switch (in.ConsumeIntegralInRange<int>(0, 3)) {
       case 0: cloud(in); break;
       case 1: image(in); break;
-      default: cameraInfo(in);
+      case 2: cameraInfo(in); break;
+      default: laserSweep(in);
     }
   } catch (const std::invalid_argument&) {
   }
