@@ -102,10 +102,16 @@ cellsight::LaserSweep toLaserSweepMsg(const cellsight::LightSweep& sweep, const 
     n.x = sweep.normal(k).x();
     n.y = sweep.normal(k).y();
     n.z = sweep.normal(k).z();
+    geometry_msgs::Vector3 a;
+    a.x = sweep.axis(k).x();
+    a.y = sweep.axis(k).y();
+    a.z = sweep.axis(k).z();
     m.emitters.push_back(e);
     m.normals.push_back(n);
     m.offsets.push_back(sweep.offset(k));
+    m.axes.push_back(a);
   }
+  m.fan_half_angle = sweep.fanHalfAngle();
   return m;
 }
 
@@ -115,12 +121,19 @@ cellsight::LightSweep fromLaserSweepMsg(const cellsight::LaserSweep& m) {
                                 std::to_string(m.normals.size()) + " normals and " + std::to_string(m.offsets.size()) +
                                 " offsets: the arrays must have one entry per frame");
   }
+  if (!m.axes.empty() && m.axes.size() != m.emitters.size()) {
+    throw std::invalid_argument("laser sweep: " + std::to_string(m.axes.size()) + " fan axes for " +
+                                std::to_string(m.emitters.size()) + " frames: give one per frame or none");
+  }
   cellsight::LightSweep s;
+  s.setFanHalfAngle(m.fan_half_angle);  // throws naming the range
   for (size_t k = 0; k < m.emitters.size(); ++k) {
     const auto& e = m.emitters[k];
     const auto& n = m.normals[k];
+    Eigen::Vector3f axis = Eigen::Vector3f::Zero();
+    if (!m.axes.empty()) axis = Eigen::Vector3d(m.axes[k].x, m.axes[k].y, m.axes[k].z).cast<float>();
     s.add(Eigen::Vector3d(e.x, e.y, e.z).cast<float>(), Eigen::Vector3d(n.x, n.y, n.z).cast<float>(),
-          static_cast<float>(m.offsets[k]));  // throws naming the frame
+          static_cast<float>(m.offsets[k]), axis);  // throws naming the frame
   }
   return s;
 }

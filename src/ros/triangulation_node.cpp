@@ -47,6 +47,7 @@ class Triangulation {
     outlier_k_ = settings.outlier_k;
     outlier_std_ = settings.outlier_std;
     normal_k_ = settings.normal_k;
+    fan_half_angle_ = settings.laser_fan_angle / 2;
     has_workspace_ = settings.has_workspace;
     workspace_ = settings.workspace;
     cellsight_ros::param(pnh, "base_frame", base_frame_);
@@ -278,6 +279,7 @@ class Triangulation {
     // there when the clusters of this cloud reach the matcher
     std::sort(sweep.begin(), sweep.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     cellsight::LightSweep light;
+    light.setFanHalfAngle(fan_half_angle_);
     for (const auto& f : sweep) light.addLaserFrame(f.second);
     sweep_pub_.publish(cellsight_ros::toLaserSweepMsg(light, base_frame_, stamp));
     cloud_pub_.publish(res.cloud);
@@ -307,6 +309,7 @@ class Triangulation {
   int outlier_k_ = 20;
   double outlier_std_ = 3.0;
   int normal_k_ = 15;
+  double fan_half_angle_ = 0;  // rad (0: the sheet unbounded)
   bool has_workspace_ = false;
   Eigen::AlignedBox3f workspace_;
   tf2_ros::Buffer buffer_;

@@ -83,6 +83,9 @@ ScannerSettings loadScannerSettings(const std::string& path) {
     s.workspace = Eigen::AlignedBox3f(lo, hi);
     s.has_workspace = true;
   }
+  s.laser_fan_angle = m.getDouble("laser_fan_angle", s.laser_fan_angle);
+  if (!(s.laser_fan_angle >= 0 && s.laser_fan_angle < M_PI))
+    m.fail("laser_fan_angle", "must be in [0, pi) (radians, the projector's full fan; 0: unbounded)");
   m.finish();
   return s;
 }

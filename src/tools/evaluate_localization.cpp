@@ -256,7 +256,7 @@ int runOutliers(const Options& o) {
 struct ScoredDetection {
   std::string model;
   Eigen::Isometry3d pose;
-  double fitness = 0, coverage = 0, rmse = 0, see_through = 0;
+  double fitness = 0, coverage = 0, rmse = 0, see_through = 0, unseen = 0;
 };
 
 /// Detections against a scene's truth: each object takes the nearest unused detection of its
@@ -297,6 +297,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
       p["coverage"] = dets[bi].coverage;
       p["rmse_mm"] = dets[bi].rmse * 1e3;
       p["see_through"] = dets[bi].see_through;
+      p["unseen"] = dets[bi].unseen;
       terr->push_back(be.translation * 1e3);
       rerr->push_back(be.rotation / kDeg);
       ++counts->tp;
@@ -317,7 +318,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
     ++counts->fp;
     const Eigen::Vector3d at = dets[i].pose * centroids.centroid(dets[i].model);
     json f = {{"model", dets[i].model},       {"fitness", dets[i].fitness}, {"coverage", dets[i].coverage},
-              {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through},
+              {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through}, {"unseen", dets[i].unseen},
               {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)}};
     double nearest = 1e9;
     for (const auto& o : scene.objects) {
@@ -384,6 +385,9 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
     makeDirs(o.dump_clusters);
     for (size_t i = 0; i < clusters.size(); ++i)
       saveCloud(o.dump_clusters + "/" + scene.name + "_cluster_" + std::to_string(i) + ".ply", clusters[i]);
+    ScanCloud support;  // the table points the free-space test (max_see_through) reads
+    for (const auto& p : cr.support_points) support.append(p, 0.f);
+    saveCloud(o.dump_clusters + "/" + scene.name + "_support.ply", support);
   }
   const Eigen::Vector3f eye = scene.scanner_camera.T_base_camera.translation().cast<float>();
   const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
@@ -391,7 +395,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   MatchStats st;
   const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, light);
   std::vector<ScoredDetection> dets;
-  for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through});
+  for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through, d.unseen});
   json sj = scoreDetections(scene, lib, matcher, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, counts, terr, rerr);
   // a missed part: the pose of its model nearest the truth that validation refused, with the
   // figures it failed on
@@ -406,7 +410,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
         if (e.translation >= nearest) continue;
         nearest = e.translation;
         p["nearest_rejected"] = {{"fitness", r.fitness},       {"coverage", r.coverage},
-                                 {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through},
+                                 {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through}, {"unseen", r.unseen},
                                  {"cluster", r.cluster},       {"t_err_mm", e.translation * 1e3},
                                  {"r_err_deg", e.rotation / kDeg},
                                  {"pose", cellsight_tools::poseToJson(r.pose)}};
@@ -476,7 +480,7 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
     std::vector<double> t1, r1;
     // the light sheet frame by frame, as the scanner knows it: the poses the robot reported and
     // the calibrated flange → laser transform
-    const LightSweep light = LightSweep::fromFlangePoses(sweep.poses, cal.T_flange_laser);
+    const LightSweep light = LightSweep::fromFlangePoses(sweep.poses, cal.T_flange_laser, settings.laser_fan_angle / 2);
     json sj = locateAndScore(g.scene, cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1, &light);
     sj["seed"] = seed;
     sj["scene"] = g.file;
@@ -629,7 +633,7 @@ int main(int argc, char** argv) {
   c_cells->add_option("--seeds", cell_seeds, "scene seeds");
   c_cells->add_option("--trajectory", cells.trajectory, "the scan's trajectory (config/trajectories.yaml)")
       ->capture_default_str();
-  c_cells->add_option("--dump-clusters", cells.dump_clusters, "write every scene's clusters as PLY into this folder");
+  c_cells->add_option("--dump-clusters", cells.dump_clusters, "write every scene's clusters (and its support points) as PLY into this folder");
   c_cells->add_option("--seeds-file", seeds_file, "a seeds file, e.g. config/heldout_seeds.yaml")->check(CLI::ExistingFile);
   c_cells->add_option("--out", cells_out, "where the generated scenes go")->capture_default_str();
   c_cells->add_option("--json", cells.json, "write the figures to this JSON file");

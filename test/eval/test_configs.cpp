@@ -94,6 +94,7 @@ TEST(ShippedConfig, ScannerSettingsLoadAndTypoIsNamed) {
   const ScannerSettings s = loadScannerSettings(kConfig + "/scanner.yaml");
   EXPECT_TRUE(s.has_workspace);
   EXPECT_EQ(s.line.smoothing_degree, 2);
+  EXPECT_GT(s.laser_fan_angle, 0.5) << "the demo projector's fan bounds the light sweep";
   const std::string dir = cellsight_test::tempDir();
   cellsight_test::writeText(dir + "/s.yaml", "line: {estimater: centroid}\n");
   const std::string msg = cellsight_test::errorOf([&] { loadScannerSettings(dir + "/s.yaml"); });
@@ -104,7 +105,8 @@ TEST(ShippedConfig, ScannerSettingsRefuseValuesThatPassAsNumbers) {
   const std::string dir = cellsight_test::tempDir();
   for (const auto& [text, key] : std::vector<std::pair<std::string, std::string>>{
            {"outlier_k: -5\n", "outlier_k"}, {"normal_k: 1\n", "normal_k"}, {"outlier_std: .nan\n", "outlier_std"},
-           {"line: {max_run: 0}\n", "line.max_run"}, {"line: {min_contrast: -1}\n", "line.min_contrast"}}) {
+           {"line: {max_run: 0}\n", "line.max_run"}, {"line: {min_contrast: -1}\n", "line.min_contrast"},
+           {"laser_fan_angle: 4\n", "laser_fan_angle"}}) {
     cellsight_test::writeText(dir + "/s.yaml", text);
     const std::string msg = cellsight_test::errorOf([&] { loadScannerSettings(dir + "/s.yaml"); });
     EXPECT_NE(msg.find(key + ": must be"), std::string::npos) << text << " -> " << msg;

@@ -54,6 +54,7 @@ TEST(LightSweep, FromFlangePosesUsesTheLaserFrame) {
   }
   const LightSweep s = LightSweep::fromFlangePoses(flange, T_flange_laser);
   ASSERT_EQ(s.size(), 20u);
+  EXPECT_LT((s.axis(7).cast<double>() - (flange[7] * T_flange_laser).linear().col(2)).norm(), 1e-6) << "the fan's axis: laser z";
   // a point on frame 7's sheet, on the table: lit from frame 7's emitter
   const Eigen::Isometry3d L7 = flange[7] * T_flange_laser;
   const Plane sheet = laserPlane(L7);
@@ -63,6 +64,39 @@ TEST(LightSweep, FromFlangePosesUsesTheLaserFrame) {
   Eigen::Vector3f e;
   ASSERT_TRUE(s.emitterFor(p.cast<float>(), &e));
   EXPECT_LT((e.cast<double>() - L7.translation()).norm(), 1e-5);
+}
+
+// A projector's fan lights its sheet only within the fan's half-angle of its axis: a point of
+// the sheet beyond it was never lit, whatever the frames bracketing it.
+TEST(LightSweep, TheFanBoundsTheSheet) {
+  Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
+  T_flange_laser.translation() = Eigen::Vector3d(0, 0.06, 0.04);
+  T_flange_laser.linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> flange;
+  for (int k = 0; k < 20; ++k) {
+    Eigen::Isometry3d F = Eigen::Isometry3d::Identity();
+    F.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+    F.translation() = Eigen::Vector3d(0.5, -0.1 + 0.01 * k, 0.4);
+    flange.push_back(F);
+  }
+  const double half = 0.5;  // rad
+  const LightSweep fan = LightSweep::fromFlangePoses(flange, T_flange_laser, half);
+  const LightSweep open = LightSweep::fromFlangePoses(flange, T_flange_laser);
+  EXPECT_DOUBLE_EQ(fan.fanHalfAngle(), half);
+  // rays of frame 7's sheet at 0.9 and 1.1 x the half-angle from its axis, down to the table
+  const Eigen::Isometry3d L7 = flange[7] * T_flange_laser;
+  for (const double share : {0.0, 0.9, -0.9, 1.1, -1.1}) {
+    const Eigen::Vector3d dir = L7.linear() * Eigen::Vector3d(std::sin(share * half), 0, std::cos(share * half));
+    const Eigen::Vector3d p = L7.translation() + dir * ((0.0 - L7.translation().z()) / dir.z());
+    Eigen::Vector3f e;
+    EXPECT_TRUE(open.emitterFor(p.cast<float>(), &e)) << share;
+    EXPECT_EQ(fan.emitterFor(p.cast<float>(), &e), std::abs(share) < 1) << share;
+  }
+  LightSweep s;
+  EXPECT_THROW(s.setFanHalfAngle(-0.1), std::invalid_argument);
+  EXPECT_THROW(s.setFanHalfAngle(M_PI / 2), std::invalid_argument);
+  EXPECT_THROW(s.add(Eigen::Vector3f::Zero(), Eigen::Vector3f::UnitX(), 0.f, Eigen::Vector3f(0.f, 0.f, 2.f)),
+               std::invalid_argument);
 }
 
 TEST(LightSweep, BadFramesAreRefusedAndShortSweepsLightNothing) {

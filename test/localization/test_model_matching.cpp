@@ -393,6 +393,65 @@ TEST(ModelMatching, FitnessCountsOnlyWhatTheSheetLit) {
   EXPECT_NEAR(ignored[0].fitness, without[0].fitness, 0.02);
 }
 
+// A holder-sized box that is not in the library, seen from above: its top is a flat rectangle
+// that the holder's flat bottom (the holder upside down, 50 x 30 mm) explains, overhanging the
+// box's 36 mm by 7 mm at each end where the scan saw nothing. That overhang faces the camera and the sheet squarely and nothing
+// hid it, so the scan would have measured it: the pose is refused (max_unseen). The holder
+// itself, scanned the same way, is found and claims no such surface.
+TEST(ModelMatching, SurfaceTheScanWouldHaveMeasuredIsNotClaimed) {
+  // the sheet x = const sweeps along x; its emitter above the table, to the -y side
+  LightSweep sweep;
+  for (int k = 0; k <= 300; ++k) {
+    const float x = 0.30f + 0.001f * k;
+    sweep.add({x, -0.15f, 0.45f}, Eigen::Vector3f::UnitX(), -x);
+  }
+  // what the camera sees of `mesh` at T and the sheet reached
+  auto litView = [&](const TriangleMesh& mesh, const Eigen::Isometry3d& T, uint64_t seed) {
+    const ScanCloud view = singleViewCloud(mesh, T, kEye, 0.001, 2e-5, seed);
+    RayCaster part;
+    part.addMesh(mesh, T);
+    part.commit();
+    ScanCloud lit;
+    for (size_t i = 0; i < view.size(); ++i) {
+      Eigen::Vector3f e;
+      if (!sweep.emitterFor(view.points[i], &e)) continue;
+      const Eigen::Vector3f beam = view.points[i] - e;
+      const float along = beam.norm();
+      if (!part.occluded(e, beam / along, 0.f, along - 0.0005f)) lit.append(view.points[i], 0.f);
+    }
+    return lit;
+  };
+  Eigen::Isometry3d T_box = onTable(0.40, 0.01, 0.39);
+  T_box.translation().z() = 0.016;  // makeBox is centred
+  const ScanCloud box = litView(makeBox({0.036, 0.030, 0.032}), T_box, 3);
+  const Eigen::Isometry3d T_holder = onTable(0.45, 0.02, 0.39);
+  const ScanCloud holder = litView(library()->model("holder").mesh, T_holder, 4);
+  ASSERT_GT(box.size(), 300u);
+  ASSERT_GT(holder.size(), 300u);
+
+  MatchingConfig c = config();
+  c.max_unseen = 1.0;  // off: the box is taken for a holder, and the figure says why it should not be
+  MatchStats st;
+  const auto taken = ModelMatcher(library(), c).locate({box}, {"holder"}, &st, nullptr, nullptr, nullptr, &sweep);
+  ASSERT_EQ(taken.size(), 1u) << "the box's top should fit the holder's bottom well enough to pass the other tests";
+  MatchingConfig on = config();
+  on.max_unseen = 0.045;  // config/matching.yaml
+  ModelMatcher m(library(), on);
+  const auto refused = m.locate({box}, {"holder"}, &st, nullptr, nullptr, nullptr, &sweep);
+  const auto found = m.locate({holder}, {"holder"}, nullptr, nullptr, nullptr, nullptr, &sweep);
+  std::printf("holder on a box: fitness %.2f, unseen %.3f; the holder itself: unseen %.3f\n", taken[0].fitness,
+              taken[0].unseen, found.empty() ? -1.0 : found[0].unseen);
+  EXPECT_GT(taken[0].unseen, on.max_unseen);
+  EXPECT_TRUE(refused.empty());
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_LT(poseError(library()->model("holder").info, m.centroid("holder"), found[0].pose, T_holder).translation, 1e-3);
+  EXPECT_LT(found[0].unseen, 0.01);
+  // without the sweep nothing says where the sheet went: no surface is called unseen
+  const auto no_sweep = ModelMatcher(library(), c).locate({box}, {"holder"});
+  ASSERT_EQ(no_sweep.size(), 1u);
+  EXPECT_EQ(no_sweep[0].unseen, 0.0);
+}
+
 // Fine PPF bins make the key range too large for the table's dense index (> 2^24 keys): the
 // table falls back to searching its sorted keys and must find the same part.
 TEST(ModelMatching, FinePpfBinsUseTheSearchedTable) {
@@ -445,6 +504,10 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("ppf_max_bucket"), std::string::npos);
   std::ofstream(path) << "refine_candidates_near: 1.2\n";
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("refine_candidates_near"), std::string::npos);
+  std::ofstream(path) << "max_view_angle: 1.0\nunseen_view_angle: 1.2\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("unseen_view_angle"), std::string::npos);
+  std::ofstream(path) << "max_unseen: -0.1\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("max_unseen"), std::string::npos);
 }
 
 namespace {

@@ -42,14 +42,28 @@ TEST(Conversions, PlaneAndCameraInfoRoundTrip) {
 
 TEST(Conversions, LaserSweepRoundTripAndRefusals) {
   cellsight::LightSweep s;
-  for (int k = 0; k < 3; ++k) s.add({0.01f * k, 0.2f, 0.5f}, Eigen::Vector3f(0.f, 0.6f, 0.8f), -0.1f * k);
+  for (int k = 0; k < 3; ++k)
+    s.add({0.01f * k, 0.2f, 0.5f}, Eigen::Vector3f(0.f, 0.6f, 0.8f), -0.1f * k, Eigen::Vector3f(0.f, 0.8f, -0.6f));
+  s.setFanHalfAngle(0.5);
   const cellsight::LaserSweep m = toLaserSweepMsg(s, "base_link", ros::Time(5, 0));
   EXPECT_EQ(m.header.frame_id, "base_link");
   const cellsight::LightSweep back = fromLaserSweepMsg(m);
   ASSERT_EQ(back.size(), 3u);
   EXPECT_TRUE(back.emitter(2).isApprox(s.emitter(2)));
   EXPECT_TRUE(back.normal(1).isApprox(s.normal(1)));
+  EXPECT_TRUE(back.axis(0).isApprox(s.axis(0)));
   EXPECT_FLOAT_EQ(back.offset(2), -0.2f);
+  EXPECT_DOUBLE_EQ(back.fanHalfAngle(), 0.5);
+  // a sweep without axes (an older publisher): the sheet unbounded
+  auto no_axes = m;
+  no_axes.axes.clear();
+  EXPECT_TRUE(fromLaserSweepMsg(no_axes).axis(1).isZero());
+  auto few_axes = m;
+  few_axes.axes.pop_back();
+  EXPECT_THROW(fromLaserSweepMsg(few_axes), std::invalid_argument);
+  auto wide = m;
+  wide.fan_half_angle = 2.0;
+  EXPECT_THROW(fromLaserSweepMsg(wide), std::invalid_argument);
   auto shorter = m;
   shorter.offsets.pop_back();
   try {

@@ -136,6 +136,15 @@ struct MatchingConfig {
   /// behind them (locate() given the support's points): a part fitted onto a smaller object
   /// overhangs it, and the table was seen under the overhang. 1: off.
   double max_see_through = 1.0;
+  /// At most this share of the model's visible points may be surface the scan should have
+  /// measured and did not (PartDetection::unseen): seen by the camera and lit by the sheet, both
+  /// within unseen_view_angle of the normal, farther than unseen_radius from every scan point and
+  /// above the support by more, with no scan point on the camera's ray or the beam to it (nothing
+  /// hid it). A part fitted onto a smaller object claims such surface; a true part's misses lie at
+  /// its edges, at grazing angles or in another part's shadow. Needs the LightSweep; 1: off.
+  double max_unseen = 1.0;
+  double unseen_radius = 0.003;      ///< m
+  double unseen_view_angle = 1.05;   ///< rad
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
   int max_instances = 3;           ///< detections per cluster (touching parts)
@@ -161,6 +170,9 @@ struct PartDetection {
   /// share of the model's visible points through which the camera saw the support behind
   /// (free-space violation; 0 when locate() had no support points)
   double see_through = 0;
+  /// share of the model's visible points the scan should have measured and did not (see
+  /// MatchingConfig::max_unseen; computed for poses that pass every other test, with a light sweep)
+  double unseen = 0;
   double score = 0;      ///< fitness × coverage (ranking)
   int cluster = -1;      ///< index of the input cluster
   int iterations = 0;    ///< RANSAC hypotheses drawn

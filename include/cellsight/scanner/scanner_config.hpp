@@ -18,6 +18,9 @@ struct ScannerSettings {
   int normal_k = 15;
   bool has_workspace = false;
   Eigen::AlignedBox3f workspace;
+  /// The projector's full fan opening (its datasheet), rad, centred on the calibrated laser
+  /// frame's z: the light sweep lights nothing outside it (LightSweep). 0: unbounded.
+  double laser_fan_angle = 0;
 };
 
 /// The line-extraction thresholds a user tunes on a running cell (triangulation's

@@ -44,6 +44,8 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
     out->coverage = coverage(s, m, T, cfg.fitness_radius);
     out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
     out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
+    out->unseen = 0;  // traced for a pose that passes every other test only (rays through the scan)
+    if (s.light && accepted(*out, cfg)) visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
   };
   score(r.T, c);
   if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {

@@ -127,6 +127,10 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.max_support_gap = m.getDouble("max_support_gap", c.max_support_gap);
   if (!(c.max_support_gap >= 0)) m.fail("max_support_gap", "must be >= 0 (0: off)");
   share("max_see_through", c.max_see_through);
+  share("max_unseen", c.max_unseen);
+  positive("unseen_radius", c.unseen_radius);
+  positive("unseen_view_angle", c.unseen_view_angle);
+  if (c.unseen_view_angle > c.max_view_angle) m.fail("unseen_view_angle", "must be <= max_view_angle");
   c.max_instances = m.getInt("max_instances", c.max_instances);
   if (const auto bad = checkAcceptance(acceptanceOf(c)); !bad.first.empty()) m.fail(bad.first, bad.second);
   c.min_instance_points = m.getInt("min_instance_points", c.min_instance_points);

@@ -286,8 +286,10 @@ double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eig
 /// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
 /// itself) that have a scene point within r_F.
 /// see_through (optional): share of those visible points whose view ray runs on to seen support.
+/// unseen (optional; 0 without a light sweep or a scene grid): share of those visible points the
+/// scan should have measured and did not (MatchingConfig::max_unseen).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg, double* see_through = nullptr);
+                      const MatchingConfig& cfg, double* see_through = nullptr, double* unseen = nullptr);
 /// How far the model under T reaches below the support plane (m; <= 0: not at all).
 float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane);
 /// The pose is not physical for a part resting on the support: sunk deeper than
@@ -295,7 +297,7 @@ float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T
 /// it; `slack` widens both (coarse poses are a few millimetres off).
 bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane,
                 const MatchingConfig& cfg, float slack = 0.f);
-/// The detection passes min_fitness, min_coverage, max_rmse and max_see_through.
+/// The detection passes min_fitness, min_coverage, max_rmse, max_see_through and max_unseen.
 bool accepted(const PartDetection& d, const MatchingConfig& cfg);
 
 }  // namespace matching_detail

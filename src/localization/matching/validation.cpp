@@ -75,11 +75,20 @@ bool SupportSeen::seenBehind(const Vec3& eye, const Vec3& p, float min_height) c
   return i >= 0 && j >= 0 && i < nu && j < nv && seen[static_cast<size_t>(j) * nu + i] != 0;
 }
 
+/// How far along the camera's ray and the beam the unseen test looks for what hid a point (m):
+/// beyond the tallest part a cell holds.
+constexpr float kUnseenReach = 0.25f;
+/// The unseen test counts only points this far inside the fan (rad): the calibrated laser frame
+/// puts the fan's apex and axis within about a degree of the projector's.
+constexpr float kUnseenFanMargin = 0.035f;
+/// Model points whose normals agree this well (cos) lie on one face for the unseen test's rim.
+constexpr float kSameFace = 0.7f;
+
 /// Share of the model's points visible from the viewpoint (facing it, not hidden by the part
 /// itself) and, with s.light, lit by the sheet (facing its emitter, not shadowed by the part
 /// itself) that have a scene point within r_F (of every cluster of the call when s.whole is set).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg, double* see_through) {
+                      const MatchingConfig& cfg, double* see_through, double* unseen) {
   const Eigen::Isometry3f Ti = T.inverse();
   const Vec3 eye = Ti * cfg.viewpoint;
   const float cos_max = std::cos(static_cast<float>(cfg.max_view_angle));
@@ -88,6 +97,26 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   std::vector<float> d2(1);
   size_t visible = 0, matched = 0, through = 0;
   const SupportSeen* seen = see_through && s.support_seen && !s.support_seen->empty() ? s.support_seen : nullptr;
+  // the unseen test: scan points (every cluster's) searched along the camera's ray and the beam
+  const PointGrid* scan = s.whole ? s.whole : cfg.scene_search == "grid" ? &s.grid : nullptr;
+  if (unseen) *unseen = 0;
+  if (!s.light || !cfg.check_visibility) scan = nullptr;
+  const bool test_unseen = unseen && scan;
+  const float cos_unseen = std::cos(static_cast<float>(cfg.unseen_view_angle));
+  const float r_unseen = static_cast<float>(cfg.unseen_radius);
+  const float step = static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel));
+  const bool has_support = s.support_seen && !s.support_seen->empty();
+  // nothing the scan measured lies within a step of the segment p → to, leaving p's own surface
+  auto clearPath = [&](const Vec3& p, const Vec3& to) {
+    const Vec3 ray = to - p;
+    const float len = std::min(ray.norm(), kUnseenReach);
+    const Vec3 dir = ray.normalized();
+    for (float t = r_unseen; t < len; t += step)
+      if (scan->anyWithin(p + t * dir, step)) return false;
+    return true;
+  };
+  // the unseen test's model points: 1 visible and lit, 2 also a candidate miss
+  std::vector<uint8_t> state(test_unseen ? m.coarse->points.size() : 0, 0);
   const float min_height = static_cast<float>(cfg.voxel);  // the lowest band: the part's own footprint
   const auto& mp = m.coarse->points;
   const auto& mn = m.coarse->normals;
@@ -102,24 +131,49 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     return !(m.has_mesh && m.caster.occluded(from, dir, 0.f, dist - margin));
   };
   for (size_t i = 0; i < mp.size(); ++i) {
+    Vec3 emitter = Vec3::Zero();
+    float fan_margin = 0;
     if (cfg.check_visibility) {
       if (!reaches(eye, i)) continue;  // the camera does not see it
-      Vec3 emitter;
       // no sheet of the sweep passed it, or the sheet did not reach it
-      if (s.light && (!s.light->emitterFor(T * mp[i], &emitter) || !reaches(Ti * emitter, i))) continue;
+      if (s.light && (!s.light->emitterFor(T * mp[i], &emitter, &fan_margin) || !reaches(Ti * emitter, i))) continue;
     }
     ++visible;
+    if (test_unseen) state[i] = 1;
     const Vec3 p = T * mp[i];
     if (seen && seen->seenBehind(cfg.viewpoint, p, min_height)) ++through;
+    bool hit = false;
     if (s.whole) {
-      matched += s.whole->anyWithin(p, static_cast<float>(cfg.fitness_radius));
+      hit = s.whole->anyWithin(p, static_cast<float>(cfg.fitness_radius));
     } else if (cfg.scene_search == "grid") {
-      matched += s.grid.anyWithin(p, static_cast<float>(cfg.fitness_radius));
-    } else if (s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2) {
-      ++matched;
+      hit = s.grid.anyWithin(p, static_cast<float>(cfg.fitness_radius));
+    } else {
+      hit = s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2;
     }
+    matched += hit;
+    // measured well had it been there: it faces camera and emitter squarely, well inside the
+    // fan, clear of the support's band and of every scan point, and nothing the scan saw is on
+    // the ray or the beam
+    if (!hit && test_unseen && fan_margin >= kUnseenFanMargin && -mn[i].dot((mp[i] - eye).normalized()) >= cos_unseen &&
+        -mn[i].dot((mp[i] - Ti * emitter).normalized()) >= cos_unseen &&
+        !(has_support && s.support_seen->n.dot(p) + s.support_seen->d <= r_unseen) && !scan->anyWithin(p, r_unseen) &&
+        clearPath(p, cfg.viewpoint) && clearPath(p, emitter))
+      state[i] = 2;
+  }
+  // ... and inside what camera and sheet reach, not at its rim: every point of its own face
+  // within unseen_radius is visible and lit too (a sliver lit beside a shadow's edge gives the
+  // line extraction segments too short to keep)
+  size_t missed = 0;
+  const float r_face2 = r_unseen * r_unseen;
+  for (size_t i = 0; i < state.size(); ++i) {
+    if (state[i] != 2) continue;
+    bool inside = true;
+    for (size_t j = 0; j < mp.size() && inside; ++j)
+      inside = state[j] != 0 || (mp[j] - mp[i]).squaredNorm() > r_face2 || mn[j].dot(mn[i]) < kSameFace;
+    missed += inside;
   }
   if (see_through) *see_through = visible ? static_cast<double>(through) / visible : 0.0;
+  if (unseen) *unseen = visible ? static_cast<double>(missed) / visible : 0.0;
   return visible ? static_cast<double>(matched) / visible : 0.0;
 }
 
@@ -139,7 +193,7 @@ bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, c
 
 bool accepted(const PartDetection& d, const MatchingConfig& cfg) {
   return d.score > 0 && d.fitness >= cfg.min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse &&
-         d.see_through <= cfg.max_see_through;
+         d.see_through <= cfg.max_see_through && d.unseen <= cfg.max_unseen;
 }
 
 }  // namespace matching_detail
