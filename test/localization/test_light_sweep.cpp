@@ -16,6 +16,27 @@ LightSweep translatingSheet() {
   return s;
 }
 
+using FlangePoses = std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>>;
+
+/// The demo's laser mount (60 mm beside the flange, leaning 0.5 rad) and 20 tool-down flange
+/// poses stepping 1 cm along y, 0.4 m above the table.
+Eigen::Isometry3d laserMount() {
+  Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
+  T_flange_laser.translation() = Eigen::Vector3d(0, 0.06, 0.04);
+  T_flange_laser.linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  return T_flange_laser;
+}
+FlangePoses downSweep() {
+  FlangePoses flange;
+  for (int k = 0; k < 20; ++k) {
+    Eigen::Isometry3d F = Eigen::Isometry3d::Identity();
+    F.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();  // tool down
+    F.translation() = Eigen::Vector3d(0.5, -0.1 + 0.01 * k, 0.4);
+    flange.push_back(F);
+  }
+  return flange;
+}
+
 }  // namespace
 
 TEST(LightSweep, EmitterOfTheSheetThroughAPoint) {
@@ -42,16 +63,8 @@ TEST(LightSweep, EmitterOfTheSheetThroughAPoint) {
 
 TEST(LightSweep, FromFlangePosesUsesTheLaserFrame) {
   // laser frame: origin at the emitter, the sheet its y = 0 plane
-  Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
-  T_flange_laser.translation() = Eigen::Vector3d(0, 0.06, 0.04);
-  T_flange_laser.linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitX()).toRotationMatrix();
-  std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> flange;
-  for (int k = 0; k < 20; ++k) {
-    Eigen::Isometry3d F = Eigen::Isometry3d::Identity();
-    F.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();  // tool down
-    F.translation() = Eigen::Vector3d(0.5, -0.1 + 0.01 * k, 0.4);
-    flange.push_back(F);
-  }
+  const Eigen::Isometry3d T_flange_laser = laserMount();
+  const FlangePoses flange = downSweep();
   const LightSweep s = LightSweep::fromFlangePoses(flange, T_flange_laser);
   ASSERT_EQ(s.size(), 20u);
   EXPECT_LT((s.axis(7).cast<double>() - (flange[7] * T_flange_laser).linear().col(2)).norm(), 1e-6) << "the fan's axis: laser z";
@@ -69,16 +82,8 @@ TEST(LightSweep, FromFlangePosesUsesTheLaserFrame) {
 // A projector's fan lights its sheet only within the fan's half-angle of its axis: a point of
 // the sheet beyond it was never lit, whatever the frames bracketing it.
 TEST(LightSweep, TheFanBoundsTheSheet) {
-  Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
-  T_flange_laser.translation() = Eigen::Vector3d(0, 0.06, 0.04);
-  T_flange_laser.linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitX()).toRotationMatrix();
-  std::vector<Eigen::Isometry3d, Eigen::aligned_allocator<Eigen::Isometry3d>> flange;
-  for (int k = 0; k < 20; ++k) {
-    Eigen::Isometry3d F = Eigen::Isometry3d::Identity();
-    F.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
-    F.translation() = Eigen::Vector3d(0.5, -0.1 + 0.01 * k, 0.4);
-    flange.push_back(F);
-  }
+  const Eigen::Isometry3d T_flange_laser = laserMount();
+  const FlangePoses flange = downSweep();
   const double half = 0.5;  // rad
   const LightSweep fan = LightSweep::fromFlangePoses(flange, T_flange_laser, half);
   const LightSweep open = LightSweep::fromFlangePoses(flange, T_flange_laser);

@@ -38,6 +38,24 @@ Eigen::Isometry3d onTable(double x, double y, double yaw) {
   return T;
 }
 
+/// What the camera sees of `mesh` at T (singleViewCloud) and the sheet of `sweep` reached
+/// unshadowed by the part: the points a laser-line scan of it holds.
+ScanCloud litView(const TriangleMesh& mesh, const Eigen::Isometry3d& T, const LightSweep& sweep, uint64_t seed) {
+  const ScanCloud view = singleViewCloud(mesh, T, kEye, 0.001, 2e-5, seed);
+  RayCaster part;
+  part.addMesh(mesh, T);
+  part.commit();
+  ScanCloud lit;
+  for (size_t i = 0; i < view.size(); ++i) {
+    Eigen::Vector3f e;
+    if (!sweep.emitterFor(view.points[i], &e)) continue;
+    const Eigen::Vector3f beam = view.points[i] - e;
+    const float along = beam.norm();
+    if (!part.occluded(e, beam / along, 0.f, along - 0.0005f)) lit.append(view.points[i], 0.f);
+  }
+  return lit;
+}
+
 }  // namespace
 
 TEST(ModelMatching, FindsEachPartInItsSingleViewCloud) {
@@ -358,18 +376,7 @@ TEST(ModelMatching, FitnessCountsOnlyWhatTheSheetLit) {
     sweep.add({x, -0.35f, 0.10f}, Eigen::Vector3f::UnitX(), -x);
   }
   const ScanCloud view = singleViewCloud(mesh, truth, kEye, 0.001, 2e-5, 5);
-  RayCaster part;
-  part.addMesh(mesh, truth);
-  part.commit();
-  ScanCloud lit;
-  for (size_t i = 0; i < view.size(); ++i) {
-    Eigen::Vector3f e;
-    if (!sweep.emitterFor(view.points[i], &e)) continue;
-    const Eigen::Vector3f beam = view.points[i] - e;
-    const float along = beam.norm();
-    if (part.occluded(e, beam / along, 0.f, along - 0.0005f)) continue;
-    lit.append(view.points[i], 0.f);
-  }
+  const ScanCloud lit = litView(mesh, truth, sweep, 5);
   ASSERT_GT(lit.size(), 300u);
   ASSERT_LT(lit.size(), view.size() * 8 / 10) << "the sheet should leave a good share of the view dark";
   MatchingConfig c = config();
@@ -405,27 +412,11 @@ TEST(ModelMatching, SurfaceTheScanWouldHaveMeasuredIsNotClaimed) {
     const float x = 0.30f + 0.001f * k;
     sweep.add({x, -0.15f, 0.45f}, Eigen::Vector3f::UnitX(), -x);
   }
-  // what the camera sees of `mesh` at T and the sheet reached
-  auto litView = [&](const TriangleMesh& mesh, const Eigen::Isometry3d& T, uint64_t seed) {
-    const ScanCloud view = singleViewCloud(mesh, T, kEye, 0.001, 2e-5, seed);
-    RayCaster part;
-    part.addMesh(mesh, T);
-    part.commit();
-    ScanCloud lit;
-    for (size_t i = 0; i < view.size(); ++i) {
-      Eigen::Vector3f e;
-      if (!sweep.emitterFor(view.points[i], &e)) continue;
-      const Eigen::Vector3f beam = view.points[i] - e;
-      const float along = beam.norm();
-      if (!part.occluded(e, beam / along, 0.f, along - 0.0005f)) lit.append(view.points[i], 0.f);
-    }
-    return lit;
-  };
   Eigen::Isometry3d T_box = onTable(0.40, 0.01, 0.39);
   T_box.translation().z() = 0.016;  // makeBox is centred
-  const ScanCloud box = litView(makeBox({0.036, 0.030, 0.032}), T_box, 3);
+  const ScanCloud box = litView(makeBox({0.036, 0.030, 0.032}), T_box, sweep, 3);
   const Eigen::Isometry3d T_holder = onTable(0.45, 0.02, 0.39);
-  const ScanCloud holder = litView(library()->model("holder").mesh, T_holder, 4);
+  const ScanCloud holder = litView(library()->model("holder").mesh, T_holder, sweep, 4);
   ASSERT_GT(box.size(), 300u);
   ASSERT_GT(holder.size(), 300u);
 
