@@ -403,7 +403,8 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     std::vector<PartDetection> per_model;
   };
   SupportSeen seen;
-  if (support_plane && support_points && cfg.max_see_through < 1)
+  // the see-through test reads where the table was seen; the unseen test, where the table is
+  if (support_plane && support_points && (cfg.max_see_through < 1 || cfg.max_unseen < 1))
     seen = buildSupportSeen(*support_points, *support_plane, static_cast<float>(cfg.voxel));
   std::vector<PartDetection> out;
   std::vector<Work> round;
