@@ -400,6 +400,38 @@ TEST(ModelMatching, FitnessCountsOnlyWhatTheSheetLit) {
   EXPECT_NEAR(ignored[0].fitness, without[0].fitness, 0.02);
 }
 
+// The scanner measures little of a face steeper than about 65° to the camera (docs/localization.md,
+// Steep faces). A bracket lying on its side 0.22 m from below the camera shows it mostly such
+// faces; its scan here holds only the faces within 65°. Counting every visible point alike, the
+// right pose is refused (most of what it claims is missing); weighed by the scanner's response
+// (fitness_incidence_mid), it is found.
+TEST(ModelMatching, SteepFacesTheScannerBarelyMeasuresWeighLittle) {
+  const TriangleMesh& mesh = library()->model("bracket").mesh;
+  Eigen::Isometry3d truth = onTable(0.52, 0.22, 4.8);
+  truth.linear() = truth.linear() * Eigen::AngleAxisd(-M_PI / 2, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  const ScanCloud visible = singleViewCloud(mesh, truth, kEye, 0.001, 2e-5, 7);
+  const ScanCloud measured = singleViewCloud(mesh, truth, kEye, 0.001, 2e-5, 7, 1.13);
+  ASSERT_LT(measured.size() * 3, visible.size()) << "the view should be mostly steep faces";
+  ASSERT_GT(measured.size(), 300u);
+  MatchingConfig c = config();
+  c.fitness_incidence_mid = 0;
+  EXPECT_TRUE(ModelMatcher(library(), c).locate({measured}, {"bracket"}).empty());
+  c.fitness_incidence_mid = 1.134;
+  c.fitness_incidence_width = 0.07;
+  ModelMatcher m(library(), c);
+  const auto found = m.locate({measured}, {"bracket"});
+  ASSERT_EQ(found.size(), 1u);
+  const PoseError e = poseError(library()->model("bracket").info, m.centroid("bracket"), found[0].pose, truth);
+  std::printf("bracket showing steep faces: %zu of %zu visible points measured; weighted fitness %.3f\n",
+              measured.size(), visible.size(), found[0].fitness);
+  EXPECT_LT(e.translation, 1e-3);
+  EXPECT_LT(e.rotation, 1 * M_PI / 180);
+  // the whole view: weighted or not, the fitness is near 1
+  const auto whole = m.locate({visible}, {"bracket"});
+  ASSERT_EQ(whole.size(), 1u);
+  EXPECT_GT(whole[0].fitness, 0.9);
+}
+
 // A holder-sized box that is not in the library, seen from above: its top is a flat rectangle
 // that the holder's flat bottom (the holder upside down, 50 x 30 mm) explains, overhanging the
 // box's 36 mm by 7 mm at each end where the scan saw nothing. That overhang faces the camera and the sheet squarely and nothing
@@ -499,6 +531,10 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("unseen_view_angle"), std::string::npos);
   std::ofstream(path) << "max_unseen: -0.1\n";
   EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("max_unseen"), std::string::npos);
+  std::ofstream(path) << "fitness_incidence_mid: 1.5\n";  // beyond max_view_angle
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("fitness_incidence_mid"), std::string::npos);
+  std::ofstream(path) << "fitness_incidence_width: 0\n";
+  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("fitness_incidence_width"), std::string::npos);
 }
 
 namespace {

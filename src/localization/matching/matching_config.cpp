@@ -123,6 +123,11 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.check_illumination = m.getBool("check_illumination", c.check_illumination);
   if (m.has("viewpoint")) c.viewpoint = m.getVector3("viewpoint").cast<float>();
   positive("max_view_angle", c.max_view_angle);
+  c.fitness_incidence_mid = m.getDouble("fitness_incidence_mid", c.fitness_incidence_mid);
+  if (!(c.fitness_incidence_mid >= 0 && c.fitness_incidence_mid <= c.max_view_angle))
+    m.fail("fitness_incidence_mid", "must be in [0, max_view_angle] (rad; 0: off)");
+  positive("fitness_incidence_width", c.fitness_incidence_width);
+  c.fitness_incidence_ranks = m.getBool("fitness_incidence_ranks", c.fitness_incidence_ranks);
   positive("max_support_penetration", c.max_support_penetration);
   c.max_support_gap = m.getDouble("max_support_gap", c.max_support_gap);
   if (!(c.max_support_gap >= 0)) m.fail("max_support_gap", "must be >= 0 (0: off)");

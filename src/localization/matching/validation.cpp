@@ -1,5 +1,7 @@
 // Validation of a refined pose (coverage, visible fitness, support, acceptance) and the
 // symmetry-aware pose error and canonical pose.
+#include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include "matching_internal.hpp"
@@ -88,7 +90,7 @@ constexpr float kSameFace = 0.7f;
 /// itself) and, with s.light, lit by the sheet (facing its emitter, not shadowed by the part
 /// itself) that have a scene point within r_F (of every cluster of the call when s.whole is set).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg, double* see_through, double* unseen) {
+                      const MatchingConfig& cfg, double* see_through, double* unseen, double* plain) {
   const Eigen::Isometry3f Ti = T.inverse();
   const Vec3 eye = Ti * cfg.viewpoint;
   const float cos_max = std::cos(static_cast<float>(cfg.max_view_angle));
@@ -96,6 +98,11 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   std::vector<int> idx(1);
   std::vector<float> d2(1);
   size_t visible = 0, matched = 0, through = 0;
+  // the scanner's response at the point's camera incidence (1: every visible point alike)
+  const bool weigh = cfg.fitness_incidence_mid > 0;
+  const float mid = static_cast<float>(cfg.fitness_incidence_mid);
+  const float width = static_cast<float>(cfg.fitness_incidence_width);
+  double weight_visible = 0, weight_matched = 0;
   const SupportSeen* seen = see_through && s.support_seen && !s.support_seen->empty() ? s.support_seen : nullptr;
   // the unseen test: scan points (every cluster's) searched along the camera's ray and the beam
   const PointGrid* scan = s.whole ? s.whole : cfg.scene_search == "grid" ? &s.grid : nullptr;
@@ -139,6 +146,12 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
       if (s.light && (!s.light->emitterFor(T * mp[i], &emitter, &fan_margin) || !reaches(Ti * emitter, i))) continue;
     }
     ++visible;
+    float w = 1.f;
+    if (weigh) {
+      const float incidence = std::acos(std::clamp(-mn[i].dot((mp[i] - eye).normalized()), -1.f, 1.f));
+      w = 1.f / (1.f + std::exp((incidence - mid) / width));
+    }
+    weight_visible += w;
     if (test_unseen) state[i] = 1;
     const Vec3 p = T * mp[i];
     if (seen && seen->seenBehind(cfg.viewpoint, p, min_height)) ++through;
@@ -151,6 +164,7 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
       hit = s.tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, idx, d2) == 1 && d2[0] <= r2;
     }
     matched += hit;
+    if (hit) weight_matched += w;
     // measured well had it been there: it faces camera and emitter squarely, well inside the
     // fan, clear of the support's band and of every scan point, and nothing the scan saw is on
     // the ray or the beam
@@ -174,7 +188,10 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   }
   if (see_through) *see_through = visible ? static_cast<double>(through) / visible : 0.0;
   if (unseen) *unseen = visible ? static_cast<double>(missed) / visible : 0.0;
-  return visible ? static_cast<double>(matched) / visible : 0.0;
+  const double share = visible ? static_cast<double>(matched) / visible : 0.0;
+  if (plain) *plain = share;
+  if (!weigh) return share;
+  return weight_visible > 0 ? weight_matched / weight_visible : 0.0;
 }
 
 /// How far the model under T reaches below the support plane (m; <= 0: not at all).
