@@ -147,7 +147,7 @@ struct MatchingConfig {
   double unseen_view_angle = 1.05;   ///< rad
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
-  /// The acceptance fitness (PartDetection::fitness) weighs each visible point by the share of
+  /// The fitness (PartDetection::fitness, and so the ranking) weighs each visible point by the share of
   /// such surface the scanner measures at its camera incidence θ (the angle between its normal
   /// and the ray to the camera): w = 1 / (1 + exp((θ - fitness_incidence_mid) /
   /// fitness_incidence_width)). A part showing the camera mostly steep faces is not refused for
@@ -155,9 +155,6 @@ struct MatchingConfig {
   /// for each. 0: off, every visible point weighs 1.
   double fitness_incidence_mid = 0;      ///< rad
   double fitness_incidence_width = 0.07; ///< rad
-  /// The ranking (PartDetection::score) uses the weighted fitness too (false: it counts every
-  /// visible point alike).
-  bool fitness_incidence_ranks = true;
   int max_instances = 3;           ///< detections per cluster (touching parts)
   int min_instance_points = 60;    ///< leftover cluster points worth another search
   /// Larger clusters (a whole scene of millions of points sent to the service) are thinned to a

@@ -42,9 +42,8 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
     out->pose = T.cast<double>();
     out->rmse = r.rmse;
     out->coverage = coverage(s, m, T, cfg.fitness_radius);
-    double plain = 0;  // every visible point alike
-    out->fitness = visibleFitness(s, m, T, cfg, &out->see_through, nullptr, &plain);
-    out->score = (cfg.fitness_incidence_ranks ? out->fitness : plain) * (cfg.min_coverage > 0 ? out->coverage : 1.0);
+    out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
+    out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
     out->unseen = 0;  // traced for a pose that passes every other test only (rays through the scan)
     if (s.light && accepted(*out, cfg)) visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
   };

@@ -127,7 +127,6 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   if (!(c.fitness_incidence_mid >= 0 && c.fitness_incidence_mid <= c.max_view_angle))
     m.fail("fitness_incidence_mid", "must be in [0, max_view_angle] (rad; 0: off)");
   positive("fitness_incidence_width", c.fitness_incidence_width);
-  c.fitness_incidence_ranks = m.getBool("fitness_incidence_ranks", c.fitness_incidence_ranks);
   positive("max_support_penetration", c.max_support_penetration);
   c.max_support_gap = m.getDouble("max_support_gap", c.max_support_gap);
   if (!(c.max_support_gap >= 0)) m.fail("max_support_gap", "must be >= 0 (0: off)");

@@ -288,11 +288,10 @@ double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eig
 /// see_through (optional): share of those visible points whose view ray runs on to seen support.
 /// unseen (optional; 0 without a light sweep or a scene grid): share of those visible points the
 /// scan should have measured and did not (MatchingConfig::max_unseen).
-/// With cfg.fitness_incidence_mid > 0 the share returned weighs each visible point by the
-/// scanner's response at its camera incidence; plain (optional) gets the unweighted share.
+/// With cfg.fitness_incidence_mid > 0 the share weighs each visible point by the scanner's
+/// response at its camera incidence (see_through and unseen count them alike).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg, double* see_through = nullptr, double* unseen = nullptr,
-                      double* plain = nullptr);
+                      const MatchingConfig& cfg, double* see_through = nullptr, double* unseen = nullptr);
 /// How far the model under T reaches below the support plane (m; <= 0: not at all).
 float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane);
 /// The pose is not physical for a part resting on the support: sunk deeper than

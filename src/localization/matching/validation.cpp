@@ -90,7 +90,7 @@ constexpr float kSameFace = 0.7f;
 /// itself) and, with s.light, lit by the sheet (facing its emitter, not shadowed by the part
 /// itself) that have a scene point within r_F (of every cluster of the call when s.whole is set).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg, double* see_through, double* unseen, double* plain) {
+                      const MatchingConfig& cfg, double* see_through, double* unseen) {
   const Eigen::Isometry3f Ti = T.inverse();
   const Vec3 eye = Ti * cfg.viewpoint;
   const float cos_max = std::cos(static_cast<float>(cfg.max_view_angle));
@@ -147,7 +147,7 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     }
     ++visible;
     float w = 1.f;
-    if (weigh) {
+    if (weigh && (mp[i] - eye).squaredNorm() > 0) {
       const float incidence = std::acos(std::clamp(-mn[i].dot((mp[i] - eye).normalized()), -1.f, 1.f));
       w = 1.f / (1.f + std::exp((incidence - mid) / width));
     }
@@ -188,10 +188,8 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   }
   if (see_through) *see_through = visible ? static_cast<double>(through) / visible : 0.0;
   if (unseen) *unseen = visible ? static_cast<double>(missed) / visible : 0.0;
-  const double share = visible ? static_cast<double>(matched) / visible : 0.0;
-  if (plain) *plain = share;
-  if (!weigh) return share;
-  return weight_visible > 0 ? weight_matched / weight_visible : 0.0;
+  if (weigh) return weight_visible > 0 ? weight_matched / weight_visible : 0.0;
+  return visible ? static_cast<double>(matched) / visible : 0.0;
 }
 
 /// How far the model under T reaches below the support plane (m; <= 0: not at all).
