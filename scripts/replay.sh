@@ -23,6 +23,8 @@ for _ in $(seq 1200); do
   if grep -qE "replay_finisher.*has died|replay_finisher: " "$LOG" && grep -q "\[ERROR\].*replay_finisher" "$LOG"; then
     echo "replay: failed, see $LOG" >&2
     grep "replay_finisher" "$LOG" | tail -3 >&2
+    # what the processing nodes said about dropped frames (missing tf, camera_info, ...)
+    grep -E "\[ (WARN|ERROR)\]" "$LOG" | grep -v "replay_finisher" | tail -8 | sed 's/^/replay: node: /' >&2
     exit 1
   fi
   kill -0 $LAUNCH_PID 2>/dev/null || { echo "replay: roslaunch ended early, see $LOG" >&2; exit 1; }
