@@ -627,4 +627,30 @@ std::vector<std::pair<int, int>> matchDescriptors(const Eigen::MatrixXf& a, cons
   return one_way;
 }
 
+std::vector<std::pair<int, int>> nearestDescriptors(const Eigen::MatrixXf& a, const Eigen::MatrixXf& b, int k) {
+  std::vector<std::pair<int, int>> out;
+  if (a.rows() == 0 || b.rows() == 0 || a.cols() != b.cols() || k < 1) return out;
+  const Eigen::VectorXf na = a.rowwise().squaredNorm(), nb = b.rowwise().squaredNorm();
+  std::vector<int> usable;
+  for (Eigen::Index j = 0; j < b.rows(); ++j)
+    if (nb(j) > 0) usable.push_back(static_cast<int>(j));
+  const size_t kk = std::min<size_t>(static_cast<size_t>(k), usable.size());
+  if (kk == 0) return out;
+  out.reserve(a.rows() * kk);
+  // a block of rows of a at a time: one matrix product each, the memory bounded
+  constexpr Eigen::Index kBlock = 1024;
+  std::vector<std::pair<float, int>> d(usable.size());
+  for (Eigen::Index i0 = 0; i0 < a.rows(); i0 += kBlock) {
+    const Eigen::Index n = std::min(kBlock, a.rows() - i0);
+    const Eigen::MatrixXf dot = a.middleRows(i0, n) * b.transpose();
+    for (Eigen::Index i = 0; i < n; ++i) {
+      if (na(i0 + i) <= 0) continue;
+      for (size_t u = 0; u < usable.size(); ++u) d[u] = {na(i0 + i) + nb(usable[u]) - 2 * dot(i, usable[u]), usable[u]};
+      std::partial_sort(d.begin(), d.begin() + kk, d.end());
+      for (size_t u = 0; u < kk; ++u) out.emplace_back(static_cast<int>(i0 + i), d[u].second);
+    }
+  }
+  return out;
+}
+
 }  // namespace cellsight

@@ -103,6 +103,7 @@ int runDescriptorEvaluation(const DescriptorEvalOptions& o) {
   MatchingConfig base = loadMatchingConfig(o.root + "/config/matching.yaml");
   base.coarse = "ransac";
   base.max_iterations = o.max_iterations;
+  base.ransac_sampling = o.sampling;
   base.max_instances = 1;
   base.min_coverage = 0;
   base.threads = 1;
@@ -119,9 +120,10 @@ int runDescriptorEvaluation(const DescriptorEvalOptions& o) {
 
   json j;
   j["test"] = "held-out laser views (view seeds from " + std::to_string(o.first_seed) +
-              ", never drawn in training) registered onto the whole model: the same coarse voxel, normals, mutual "
-              "matching, RANSAC (" + std::to_string(o.max_iterations) + " hypotheses at most), ICP and validation for every "
-              "descriptor";
+              ", never drawn in training) registered onto the whole model: the same coarse voxel, normals, descriptor "
+              "matching, RANSAC (" + o.sampling + " sampling, " + std::to_string(o.max_iterations) +
+              " hypotheses at most), ICP and validation for every descriptor";
+  j["ransac_sampling"] = o.sampling;
   j["criteria"] = {{"feature_match_recall", "share of pairs with >= 5 % of the mutual descriptor matches within 2 x "
                                             "resolution (4 mm) of the true correspondence"},
                    {"registration_success", "translation <= 20 mm and rotation <= 7.5 deg about the model centroid "
@@ -263,6 +265,7 @@ int runDescriptorEvaluation(const DescriptorEvalOptions& o) {
         MatchingConfig cfg = scaled;
         cfg.coarse = "ransac";
         cfg.max_iterations = o.max_iterations;
+        cfg.ransac_sampling = o.sampling;
         cfg.min_coverage = 0;
         cfg.max_instances = 1;
         cfg.viewpoint = Eigen::Vector3f::Zero();

@@ -19,6 +19,7 @@ struct DescriptorEvalOptions {
   std::string augment = "config/descriptors/learned_k16_augment.pt";  ///< augmentation model
   int rotations = 8;                     ///< turns of the multi-rotation method
   int max_iterations = 20000;            ///< RANSAC hypotheses, the same for every method
+  std::string sampling = "guided";       ///< RANSAC sampling (MatchingConfig::ransac_sampling), every method and case
   bool real = true;                      ///< the real scenes too (skipped when the data is absent)
   std::string json, png;
   double limit_recall_margin = -1;       ///< exit 4 unless learned recall ≥ FPFH's + this (< 0: no check)

@@ -661,6 +661,11 @@ int main(int argc, char** argv) {
       ->check(cellsight_tools::positiveInt())->capture_default_str();
   c_desc->add_option("--max-iterations", desc.max_iterations, "RANSAC hypotheses at most (every method)")
       ->check(cellsight_tools::positiveInt())->capture_default_str();
+  c_desc->add_option("--sampling", desc.sampling,
+                     "RANSAC sampling for every method and case: guided (one match, then two that agree with it, "
+                     "from each scene point's nearest model descriptors) or uniform (three mutual matches, the thesis's)")
+      ->check(CLI::IsMember({"guided", "uniform"}))
+      ->capture_default_str();
   bool no_real = false;
   c_desc->add_flag("--no-real", no_real, "leave out the real scenes");
   c_desc->add_option("--json", desc.json, "write the figures to this JSON file");

@@ -1,5 +1,6 @@
 // Coarse stage "ransac" (the thesis's method): FPFH (or learned) descriptor correspondences and
 // RANSAC on 3-point hypotheses with cheap pre-rejection.
+#include <limits>
 #include <numeric>
 #include <random>
 
@@ -14,6 +15,16 @@ std::vector<Correspondence> correspondences(const SceneData& s, const ModelMatch
   pcl::FPFHSignature33 q;
   std::vector<int> idx(1);
   std::vector<float> d2(1);
+  if (cfg.ransac_sampling == "guided") {
+    // every scene point's nearest model descriptors, one way
+    const int k = std::min<int>(cfg.ransac_neighbours, static_cast<int>(m.fpfh_valid.size()));
+    for (int si : s.fpfh_valid) {
+      std::copy(s.fpfh[si].begin(), s.fpfh[si].end(), q.histogram);
+      const int found = m.fpfh_tree.nearestKSearch(q, k, idx, d2);
+      for (int j = 0; j < found; ++j) one_way.push_back({si, m.fpfh_valid[idx[j]]});
+    }
+    return one_way;
+  }
   for (int si : s.fpfh_valid) {
     std::copy(s.fpfh[si].begin(), s.fpfh[si].end(), q.histogram);
     if (m.fpfh_tree.nearestKSearch(q, 1, idx, d2) < 1) continue;
@@ -31,8 +42,10 @@ std::vector<Correspondence> learnedCorrespondences(const SceneData& s, const Mod
                                                    const MatchingConfig& cfg) {
   std::vector<Correspondence> out;
   if (turn >= m.learned.size() || s.learned.rows() == 0) return out;
-  for (const auto& [si, mi] : matchDescriptors(s.learned, m.learned[turn], cfg.mutual_filter, cfg.min_correspondences))
-    out.push_back({si, mi});
+  const auto pairs = cfg.ransac_sampling == "guided"
+                         ? nearestDescriptors(s.learned, m.learned[turn], cfg.ransac_neighbours)
+                         : matchDescriptors(s.learned, m.learned[turn], cfg.mutual_filter, cfg.min_correspondences);
+  for (const auto& [si, mi] : pairs) out.push_back({si, mi});
   return out;
 }
 
@@ -69,19 +82,47 @@ std::vector<Hypothesis> ransac(const SceneData& s, const ModelMatcher::ModelInde
   const auto& mn = m.coarse->normals;
   long needed = cfg.max_iterations;
   const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
+  // two matches agree when a rigid motion can take one pair onto the other: the edge is long
+  // enough, as long in scene and model (guided: and no longer than the model), and the normals'
+  // angle the same
+  const bool guided = cfg.ransac_sampling == "guided";
+  const float max_edge = guided && m.diameter > 0 ? m.diameter / sim : std::numeric_limits<float>::max();
+  auto agree = [&](const Correspondence& A, const Correspondence& B) {
+    const float ds = (sp[A.scene] - sp[B.scene]).norm(), dm = (mp[A.model] - mp[B.model]).norm();
+    if (ds < min_edge || ds > max_edge || std::min(ds, dm) < sim * std::max(ds, dm)) return false;
+    // the angle between the two normals is invariant under a rigid motion
+    return std::abs(sn[A.scene].dot(sn[B.scene]) - mn[A.model].dot(mn[B.model])) <= 1 - cos_tol;
+  };
+  // guided: a drawn match, then triplets from the matches that agree with it
+  constexpr int kTripletsPerSeed = 20;
+  std::vector<int> agreeing;
+  int seed_match = -1, seed_left = 0;
   for (long it = 0; it < std::min<long>(needed, cfg.max_iterations); ++it) {
     ++*iterations;
-    int c[3] = {pick(rng), pick(rng), pick(rng)};
+    int c[3];
+    if (guided) {
+      if (seed_left == 0) {
+        seed_match = pick(rng);
+        seed_left = kTripletsPerSeed;
+        agreeing.clear();
+        for (int j = 0; j < n; ++j)
+          if (corr[j].scene != corr[seed_match].scene && agree(corr[seed_match], corr[j])) agreeing.push_back(j);
+      }
+      --seed_left;
+      if (agreeing.size() < 2) {
+        seed_left = 0;
+        continue;
+      }
+      std::uniform_int_distribution<size_t> among(0, agreeing.size() - 1);
+      c[0] = seed_match;
+      c[1] = agreeing[among(rng)];
+      c[2] = agreeing[among(rng)];
+    } else {
+      c[0] = pick(rng), c[1] = pick(rng), c[2] = pick(rng);
+    }
     if (c[0] == c[1] || c[0] == c[2] || c[1] == c[2]) continue;
     bool ok = true;
-    for (int a = 0; a < 3 && ok; ++a) {
-      const int b = (a + 1) % 3;
-      const Correspondence &A = corr[c[a]], &B = corr[c[b]];
-      const float ds = (sp[A.scene] - sp[B.scene]).norm(), dm = (mp[A.model] - mp[B.model]).norm();
-      if (ds < min_edge || std::min(ds, dm) < sim * std::max(ds, dm)) ok = false;
-      // the angle between the two normals is invariant under a rigid motion
-      else if (std::abs(sn[A.scene].dot(sn[B.scene]) - mn[A.model].dot(mn[B.model])) > 1 - cos_tol) ok = false;
-    }
+    for (int a = 0; a < 3 && ok; ++a) ok = agree(corr[c[a]], corr[c[(a + 1) % 3]]);
     if (!ok) continue;
     Eigen::Matrix3f M, S;
     for (int a = 0; a < 3; ++a) {

@@ -84,6 +84,9 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   if (c.ppf_ref_step < 1) m.fail("ppf_ref_step", "must be >= 1");
   atLeast("ppf_max_bucket", c.ppf_max_bucket, 1);
   atLeast("ppf_candidates", c.ppf_candidates, 1);
+  c.ransac_sampling = m.getString("ransac_sampling", c.ransac_sampling);
+  if (c.ransac_sampling != "uniform" && c.ransac_sampling != "guided") m.fail("ransac_sampling", "must be uniform or guided");
+  atLeast("ransac_neighbours", c.ransac_neighbours, 1);
   atLeast("max_iterations", c.max_iterations, 1);
   c.confidence = m.getDouble("confidence", c.confidence);
   if (!(c.confidence > 0 && c.confidence < 1)) m.fail("confidence", "must be in (0, 1)");
