@@ -1,4 +1,4 @@
-# registration success: held-out laser views of our parts, and real scenes (written by a cellsight tool)
+# registration success (RANSAC, guided sampling): held-out laser views of our parts, and real scenes (written by a cellsight tool)
 # re-plot: cd <this folder> && gnuplot learned_descriptors.png.gp   (writes learned_descriptors.png; gnuplot -e "out='other.png'" learned_descriptors.png.gp writes other.png)
 if (!exists("out")) out = 'learned_descriptors.png'
 if (strstrt(GPVAL_TERMINALS, 'pngcairo') > 0) {
@@ -7,7 +7,7 @@ if (strstrt(GPVAL_TERMINALS, 'pngcairo') > 0) {
   set terminal png noenhanced size 900,560
 }
 set output out
-set title 'registration success: held-out laser views of our parts, and real scenes'
+set title 'registration success (RANSAC, guided sampling): held-out laser views of our parts, and real scenes'
 set ylabel 'success [%]'
 set yrange [0:105]
 set ytics 0,20,100

@@ -299,7 +299,8 @@ int runDescriptorEvaluation(const DescriptorEvalOptions& o) {
     std::printf("real scenes: %s not found: skipped\n", data.c_str());
   }
   if (!o.json.empty()) writeJson(o.json, j);
-  plotBars(o.png, "registration success: held-out laser views of our parts, and real scenes", {"success [%]", true, false},
+  plotBars(o.png, "registration success (RANSAC, " + o.sampling + " sampling): held-out laser views of our parts, and real scenes",
+           {"success [%]", true, false},
            categories, series);
   // summary and the optional check
   const double fpfh_recall = tallies[0]["all"].toJson()["feature_match_recall"].get<double>();
