@@ -274,6 +274,38 @@ TEST(LearnedDescriptor, RansacAndFgrRunOnLearnedFeatures) {
   }
 }
 
+TEST(LearnedDescriptor, GuidedSamplingRegistersHeldOutViews) {
+  // views the trainer never drew, registered onto the whole model with the learned descriptor
+  // and guided sampling (its matches one way, then the ones that agree), the shipped settings
+  // otherwise: the evaluation measured 0.92 of such views registered (docs/learned_descriptors.md)
+  auto lib = std::make_shared<const ModelLibrary>(kRoot + "/config/models");
+  MatchingConfig c = loadMatchingConfig(kRoot + "/config/matching.yaml");
+  c.coarse = "ransac";
+  c.ransac_sampling = "guided";
+  c.descriptor = "learned";
+  c.learned_fallback = false;
+  c.max_iterations = 5000;
+  c.min_coverage = 0;
+  c.max_instances = 1;
+  c.threads = 1;
+  const ModelMatcher m(lib, c);
+  int registered = 0;
+  for (const std::string part : {"bracket", "housing", "holder"}) {
+    const uint64_t seed = 300004000;
+    const LaserView v = someView(part, seed);
+    const Eigen::Vector3f eye = randomLaserSetup(seed).eye;  // someView's camera: orients the normals
+    MatchStats st;
+    auto d = m.locate({v.cloud}, {part}, &st, &eye);
+    for (const auto& r : st.rejected)  // none accepted: the pose it settled on
+      if (d.empty() || (d[0].fitness <= 0 && r.score > d[0].score)) d = {r};
+    ASSERT_FALSE(d.empty()) << part;
+    const PoseError e = poseError(lib->model(part).info, m.centroid(part), d[0].pose, v.pose);
+    std::printf("%s: %.1f mm, %.1f deg\n", part.c_str(), e.translation * 1e3, e.rotation * 180 / M_PI);
+    registered += e.translation <= 0.020 && e.rotation <= 7.5 * M_PI / 180;
+  }
+  EXPECT_GE(registered, 2);
+}
+
 TEST(LearnedDescriptor, ClusterTooLargeForTheNetworkIsAWarning) {
   // more coarse points than the network takes: the matcher warns and goes on (no throw from a
   // worker thread, which would end the process)
