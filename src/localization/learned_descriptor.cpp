@@ -631,9 +631,9 @@ std::vector<std::pair<int, int>> nearestDescriptors(const Eigen::MatrixXf& a, co
   std::vector<std::pair<int, int>> out;
   if (a.rows() == 0 || b.rows() == 0 || a.cols() != b.cols() || k < 1) return out;
   const Eigen::VectorXf na = a.rowwise().squaredNorm(), nb = b.rowwise().squaredNorm();
-  std::vector<int> usable;
+  std::vector<int> usable;  // rows with a descriptor (NaN ones have none: they would break the sort)
   for (Eigen::Index j = 0; j < b.rows(); ++j)
-    if (nb(j) > 0) usable.push_back(static_cast<int>(j));
+    if (nb(j) > 0 && std::isfinite(nb(j))) usable.push_back(static_cast<int>(j));
   const size_t kk = std::min<size_t>(static_cast<size_t>(k), usable.size());
   if (kk == 0) return out;
   out.reserve(a.rows() * kk);
@@ -644,7 +644,7 @@ std::vector<std::pair<int, int>> nearestDescriptors(const Eigen::MatrixXf& a, co
     const Eigen::Index n = std::min(kBlock, a.rows() - i0);
     const Eigen::MatrixXf dot = a.middleRows(i0, n) * b.transpose();
     for (Eigen::Index i = 0; i < n; ++i) {
-      if (na(i0 + i) <= 0) continue;
+      if (!(na(i0 + i) > 0) || !std::isfinite(na(i0 + i))) continue;
       for (size_t u = 0; u < usable.size(); ++u) d[u] = {na(i0 + i) + nb(usable[u]) - 2 * dot(i, usable[u]), usable[u]};
       std::partial_sort(d.begin(), d.begin() + kk, d.end());
       for (size_t u = 0; u < kk; ++u) out.emplace_back(static_cast<int>(i0 + i), d[u].second);

@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 
 #include "cellsight/common/errors.hpp"
@@ -296,8 +297,10 @@ TEST(LearnedDescriptor, GuidedSamplingRegistersHeldOutViews) {
     const Eigen::Vector3f eye = randomLaserSetup(seed).eye;  // someView's camera: orients the normals
     MatchStats st;
     auto d = m.locate({v.cloud}, {part}, &st, &eye);
-    for (const auto& r : st.rejected)  // none accepted: the pose it settled on
-      if (d.empty() || (d[0].fitness <= 0 && r.score > d[0].score)) d = {r};
+    if (d.empty()) {  // none accepted: the best refused pose it settled on (as the evaluation takes it)
+      for (const auto& r : st.rejected)
+        if ((r.fitness > 0 || r.rmse > 0) && (d.empty() || r.score > d[0].score)) d = {r};
+    }
     ASSERT_FALSE(d.empty()) << part;
     const PoseError e = poseError(lib->model(part).info, m.centroid(part), d[0].pose, v.pose);
     std::printf("%s: %.1f mm, %.1f deg\n", part.c_str(), e.translation * 1e3, e.rotation * 180 / M_PI);
@@ -342,6 +345,7 @@ TEST(LearnedDescriptor, ConfigurationKeysAreChecked) {
   EXPECT_NE(errorOf([&] { load("coarse: ransac\ndescriptor: learned\nlearned_dims: 8\n"); }).find("16 or 32"), std::string::npos);
   EXPECT_NE(errorOf([&] { load("coarse: ransac\nransac_sampling: random\n"); }).find("uniform or guided"), std::string::npos);
   EXPECT_NE(errorOf([&] { load("coarse: ransac\nransac_neighbours: 0\n"); }).find("ransac_neighbours"), std::string::npos);
+  EXPECT_NE(errorOf([&] { load("coarse: ransac\nransac_neighbours: 65\n"); }).find("[1, 64]"), std::string::npos);
   const MatchingConfig c = load("coarse: ransac\ndescriptor: learned\nlearned_model: d/x.pt\n");
   EXPECT_EQ(c.learned_model, dir + "/d/x.pt");  // relative to the settings file
 }
@@ -359,6 +363,25 @@ TEST(LearnedDescriptor, NearestDescriptorsAreTheKClosestRowsInOrder) {
   EXPECT_EQ(nearestDescriptors(a, b, 10).size(), 6u);  // k above b's usable rows: all three
   EXPECT_TRUE(nearestDescriptors(a, Eigen::MatrixXf(0, 2), 1).empty());
   EXPECT_TRUE(nearestDescriptors(a, Eigen::MatrixXf(4, 3), 1).empty());  // other K
+  Eigen::MatrixXf b_nan = b;
+  b_nan(0, 0) = std::numeric_limits<float>::quiet_NaN();  // no descriptor either
+  EXPECT_EQ(nearestDescriptors(a, b_nan, 10).size(), 4u);
+  // more rows than one block of the matrix product: the same as a brute-force search, and k = 1
+  // the same as matchDescriptors' one-way matches
+  std::mt19937_64 rng(3);
+  std::normal_distribution<float> N(0.f, 1.f);
+  Eigen::MatrixXf A(2500, 16), B(300, 16);
+  for (Eigen::Index i = 0; i < A.size(); ++i) A.data()[i] = N(rng);
+  for (Eigen::Index i = 0; i < B.size(); ++i) B.data()[i] = N(rng);
+  const auto p3 = nearestDescriptors(A, B, 3);
+  ASSERT_EQ(p3.size(), 7500u);
+  for (Eigen::Index i = 0; i < A.rows(); i += 97) {
+    std::vector<std::pair<float, int>> d;
+    for (Eigen::Index j = 0; j < B.rows(); ++j) d.push_back({(A.row(i) - B.row(j)).squaredNorm(), static_cast<int>(j)});
+    std::sort(d.begin(), d.end());
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(p3[3 * i + k], std::make_pair(static_cast<int>(i), d[k].second)) << i << " " << k;
+  }
+  EXPECT_EQ(nearestDescriptors(A, B, 1), matchDescriptors(A, B, false));
 }
 
 // A real scene the network never saw anything like (a Minolta range scan of a freeform toy among

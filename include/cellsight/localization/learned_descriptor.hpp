@@ -118,7 +118,8 @@ std::vector<std::pair<int, int>> matchDescriptors(const Eigen::MatrixXf& a, cons
                                                   int min_mutual = 12);
 
 /// The k nearest rows of b (Euclidean) for every row of a, nearest first: pairs (row of a, row
-/// of b), one way. Rows that are all zero take no part; k larger than b's usable rows gives them all.
+/// of b), one way. Rows that are all zero or not finite take no part; k larger than b's usable
+/// rows gives them all.
 std::vector<std::pair<int, int>> nearestDescriptors(const Eigen::MatrixXf& a, const Eigen::MatrixXf& b, int k);
 
 }  // namespace cellsight

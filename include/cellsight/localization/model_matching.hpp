@@ -61,11 +61,12 @@ struct MatchingConfig {
   int ppf_candidates = 100;
   /// How RANSAC draws its 3-point hypotheses: "uniform" (three of the mutual descriptor matches,
   /// independently; the thesis's) or "guided" (every scene point's `ransac_neighbours` nearest
-  /// model descriptors, one way; one match drawn, the other two among the matches whose
-  /// distances and normal angles agree with it: a descriptor whose right match is seldom the
-  /// nearest both ways still yields right poses; docs/learned_descriptors.md)
+  /// model descriptors, one way, mutual_filter and min_correspondences unused; one match drawn,
+  /// the other two among the matches whose distances and normal angles agree with it: a
+  /// descriptor whose right match is seldom the nearest both ways still yields right poses;
+  /// docs/learned_descriptors.md)
   std::string ransac_sampling = "uniform";
-  int ransac_neighbours = 1;       ///< guided: nearest model descriptors per scene point
+  int ransac_neighbours = 1;       ///< guided: nearest model descriptors per scene point (1-64)
   int max_iterations = 100000;     ///< RANSAC hypotheses at most
   double confidence = 0.999;       ///< adaptive RANSAC termination
   double edge_similarity = 0.9;    ///< pre-rejection: edge length ratio scene/model

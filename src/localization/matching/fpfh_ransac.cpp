@@ -1,6 +1,5 @@
 // Coarse stage "ransac" (the thesis's method): FPFH (or learned) descriptor correspondences and
 // RANSAC on 3-point hypotheses with cheap pre-rejection.
-#include <limits>
 #include <numeric>
 #include <random>
 
@@ -83,15 +82,14 @@ std::vector<Hypothesis> ransac(const SceneData& s, const ModelMatcher::ModelInde
   long needed = cfg.max_iterations;
   const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
   // two matches agree when a rigid motion can take one pair onto the other: the edge is long
-  // enough, as long in scene and model (guided: and no longer than the model), and the normals'
-  // angle the same
+  // enough and as long in scene and model, and the cosines of the normals' angles differ by at
+  // most 1 - cos(normal_tolerance)
   const bool guided = cfg.ransac_sampling == "guided";
-  const float max_edge = guided && m.diameter > 0 ? m.diameter / sim : std::numeric_limits<float>::max();
   auto agree = [&](const Correspondence& A, const Correspondence& B) {
     const float ds = (sp[A.scene] - sp[B.scene]).norm(), dm = (mp[A.model] - mp[B.model]).norm();
-    if (ds < min_edge || ds > max_edge || std::min(ds, dm) < sim * std::max(ds, dm)) return false;
+    if (ds < min_edge || std::min(ds, dm) < sim * std::max(ds, dm)) return false;
     // the angle between the two normals is invariant under a rigid motion
-    return std::abs(sn[A.scene].dot(sn[B.scene]) - mn[A.model].dot(mn[B.model])) <= 1 - cos_tol;
+    return !(std::abs(sn[A.scene].dot(sn[B.scene]) - mn[A.model].dot(mn[B.model])) > 1 - cos_tol);
   };
   // guided: a drawn match, then triplets from the matches that agree with it
   constexpr int kTripletsPerSeed = 20;
@@ -150,10 +148,12 @@ std::vector<Hypothesis> ransac(const SceneData& s, const ModelMatcher::ModelInde
     std::sort(top.begin(), top.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
     if (top.size() > keep) top.resize(keep);
     if (top.front().T.matrix() == T.matrix()) {
-      // adaptive termination from the share of descriptor matches this pose agrees with
-      int agree = 0;
-      for (const auto& cc : corr) agree += (T * mp[cc.model] - sp[cc.scene]).squaredNorm() < inl2;
-      const double w = std::max(agree, 3) / static_cast<double>(n);
+      // adaptive termination from the share of descriptor matches this pose agrees with (it
+      // assumes three independent draws: guided sampling, whose draws depend, mostly runs to
+      // max_iterations)
+      int n_agree = 0;
+      for (const auto& cc : corr) n_agree += (T * mp[cc.model] - sp[cc.scene]).squaredNorm() < inl2;
+      const double w = std::max(n_agree, 3) / static_cast<double>(n);
       const double p_all = w * w * w;
       if (p_all >= 1.0) needed = it + 1;
       else needed = std::max<long>(it + 1, static_cast<long>(std::ceil(std::log(1 - cfg.confidence) / std::log1p(-p_all))));

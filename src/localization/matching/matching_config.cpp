@@ -86,7 +86,8 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   atLeast("ppf_candidates", c.ppf_candidates, 1);
   c.ransac_sampling = m.getString("ransac_sampling", c.ransac_sampling);
   if (c.ransac_sampling != "uniform" && c.ransac_sampling != "guided") m.fail("ransac_sampling", "must be uniform or guided");
-  atLeast("ransac_neighbours", c.ransac_neighbours, 1);
+  c.ransac_neighbours = m.getInt("ransac_neighbours", c.ransac_neighbours);
+  if (c.ransac_neighbours < 1 || c.ransac_neighbours > 64) m.fail("ransac_neighbours", "must be in [1, 64]");
   atLeast("max_iterations", c.max_iterations, 1);
   c.confidence = m.getDouble("confidence", c.confidence);
   if (!(c.confidence > 0 && c.confidence < 1)) m.fail("confidence", "must be in (0, 1)");
