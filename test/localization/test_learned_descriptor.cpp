@@ -51,6 +51,16 @@ LaserView someView(const std::string& part, uint64_t seed) {
 
 std::string file(const std::string& name) { return cellsight_test::tempDir() + "/" + name; }
 
+/// `c` set for RANSAC on the shipped learned descriptor (no fallback), coverage not asked
+MatchingConfig learnedRansac(MatchingConfig c = {}) {
+  c.coarse = "ransac";
+  c.descriptor = "learned";
+  c.learned_model = kRoot + "/config/descriptors/learned_k16.pt";
+  c.learned_fallback = false;
+  c.min_coverage = 0;
+  return c;
+}
+
 }  // namespace
 
 TEST(LearnedDescriptor, SavedAndLoadedGivesTheSameUnitDescriptors) {
@@ -260,13 +270,9 @@ TEST(LearnedDescriptor, RansacAndFgrRunOnLearnedFeatures) {
   auto lib = std::make_shared<const ModelLibrary>(kRoot + "/config/models");
   const LaserView v = someView("flanged_shaft", 15);
   for (const std::string coarse : {"ransac", "fgr"}) {
-    MatchingConfig c;
+    MatchingConfig c = learnedRansac();
     c.coarse = coarse;
-    c.descriptor = "learned";
-    c.learned_model = kRoot + "/config/descriptors/learned_k16.pt";
-    c.learned_fallback = false;
     c.max_iterations = 5000;
-    c.min_coverage = 0;
     const ModelMatcher m(lib, c);
     MatchStats st;
     m.locate({v.cloud}, {"flanged_shaft"}, &st);
@@ -280,13 +286,9 @@ TEST(LearnedDescriptor, GuidedSamplingRegistersHeldOutViews) {
   // and guided sampling (its matches one way, then the ones that agree), the shipped settings
   // otherwise: the evaluation measured 0.92 of such views registered (docs/learned_descriptors.md)
   auto lib = std::make_shared<const ModelLibrary>(kRoot + "/config/models");
-  MatchingConfig c = loadMatchingConfig(kRoot + "/config/matching.yaml");
-  c.coarse = "ransac";
+  MatchingConfig c = learnedRansac(loadMatchingConfig(kRoot + "/config/matching.yaml"));
   c.ransac_sampling = "guided";
-  c.descriptor = "learned";
-  c.learned_fallback = false;
   c.max_iterations = 5000;
-  c.min_coverage = 0;
   c.max_instances = 1;
   c.threads = 1;
   const ModelMatcher m(lib, c);
@@ -313,14 +315,9 @@ TEST(LearnedDescriptor, ClusterTooLargeForTheNetworkIsAWarning) {
   // more coarse points than the network takes: the matcher warns and goes on (no throw from a
   // worker thread, which would end the process)
   auto lib = std::make_shared<const ModelLibrary>(kRoot + "/config/models");
-  MatchingConfig c;
-  c.coarse = "ransac";
-  c.descriptor = "learned";
-  c.learned_model = kRoot + "/config/descriptors/learned_k16.pt";
-  c.learned_fallback = false;
+  MatchingConfig c = learnedRansac();
   c.voxel = 0.0002;
   c.max_iterations = 10;
-  c.min_coverage = 0;
   c.max_instances = 1;
   const ModelMatcher m(lib, c);
   ScanCloud huge;
@@ -405,15 +402,10 @@ TEST(LearnedDescriptor, GuidedSamplingFindsTheUwaParasaurolophus) {
   ASSERT_FALSE(ref.empty());
   ASSERT_GE(ref[0].fitness, 0.5);
   {
-    MatchingConfig c = loadMatchingConfig(kRoot + "/config/matching_uwa.yaml");
-    c.coarse = "ransac";
-    c.descriptor = "learned";
-    c.learned_model = kRoot + "/config/descriptors/learned_k16.pt";
+    MatchingConfig c = learnedRansac(loadMatchingConfig(kRoot + "/config/matching_uwa.yaml"));
     c.learned_scale = 0.002 / c.voxel;
-    c.learned_fallback = false;
     c.ransac_sampling = "guided";
     c.max_iterations = 20000;
-    c.min_coverage = 0;
     c.max_instances = 1;
     c.threads = 1;
     c.viewpoint = Eigen::Vector3f::Zero();
