@@ -12,6 +12,7 @@
 
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/common/model_info.hpp"
+#include "cellsight/common/polygon.hpp"
 #include "cellsight/common/yaml_reader.hpp"
 
 namespace cellsight {
@@ -19,49 +20,6 @@ namespace cellsight {
 namespace {
 
 using Vec2 = Eigen::Vector2d;
-
-double cross(const Vec2& o, const Vec2& a, const Vec2& b) {
-  return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
-}
-
-/// Convex hull (Andrew's monotone chain), counter-clockwise.
-std::vector<Vec2> convexHull(std::vector<Vec2> p) {
-  std::sort(p.begin(), p.end(), [](const Vec2& a, const Vec2& b) { return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y()); });
-  if (p.size() < 3) return p;
-  std::vector<Vec2> h(2 * p.size());
-  size_t k = 0;
-  for (size_t i = 0; i < p.size(); ++i) {
-    while (k >= 2 && cross(h[k - 2], h[k - 1], p[i]) <= 0) --k;
-    h[k++] = p[i];
-  }
-  for (size_t i = p.size() - 1, t = k + 1; i > 0; --i) {
-    while (k >= t && cross(h[k - 2], h[k - 1], p[i - 1]) <= 0) --k;
-    h[k++] = p[i - 1];
-  }
-  h.resize(k - 1);
-  return h;
-}
-
-/// Inside a counter-clockwise convex polygon by at least `margin`.
-bool insideBy(const std::vector<Vec2>& poly, const Vec2& q, double margin) {
-  if (poly.size() < 3) return false;
-  for (size_t i = 0; i < poly.size(); ++i) {
-    const Vec2 a = poly[i], b = poly[(i + 1) % poly.size()];
-    if (cross(a, b, q) / (b - a).norm() < margin) return false;
-  }
-  return true;
-}
-
-/// Rotation taking unit vector `from` onto `to` (opposite vectors: a half turn about an axis
-/// across `from`; Eigen's FromTwoVectors gave NaN there in the optimised build).
-Eigen::Matrix3d rotationBetween(const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
-  if (from.dot(to) < -1 + 1e-9) {
-    Eigen::Vector3d axis = from.cross(Eigen::Vector3d::UnitX());
-    if (axis.norm() < 1e-6) axis = from.cross(Eigen::Vector3d::UnitY());
-    return Eigen::AngleAxisd(M_PI, axis.normalized()).toRotationMatrix();
-  }
-  return Eigen::Quaterniond::FromTwoVectors(from, to).toRotationMatrix();
-}
 
 struct Placed {
   Eigen::Vector2d centre;
@@ -121,7 +79,7 @@ std::vector<Eigen::Matrix3d> stableRestRotations(const TriangleMesh& mesh) {
     std::vector<Vec2> support;
     for (const auto& v : mesh.vertices)
       if (n.dot(v.cast<double>()) > extreme - 1e-5) support.push_back((R * v.cast<double>()).head<2>());
-    const std::vector<Vec2> hull = convexHull(support);
+    const std::vector<Vec2> hull = convexHull2d(support);
     if (!insideBy(hull, (R * centroid).head<2>(), 1e-3)) continue;
     const double priority = side.second;  // larger sides first
     found.emplace_back(priority, R);

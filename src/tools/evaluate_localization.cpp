@@ -417,6 +417,25 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
       }
     }
   }
+  // every pose validation refused (the best per cluster and model), and whether it was right:
+  // the figures right and wrong poses reach, for choosing acceptance thresholds on tuning cells
+  sj["rejected"] = json::array();
+  for (const auto& r : st.rejected) {
+    double t_err = 1e9, r_err = 1e9;
+    for (const auto& o : scene.objects) {
+      if (o.model != r.model) continue;
+      const PoseError e = poseError(lib.model(o.model).info, matcher.centroid(o.model), r.pose, o.T_base_object);
+      if (e.translation < t_err) t_err = e.translation, r_err = e.rotation;
+    }
+    sj["rejected"].push_back({{"model", r.model},
+                              {"cluster", r.cluster},
+                              {"fitness", r.fitness},
+                              {"coverage", r.coverage},
+                              {"rmse_mm", r.rmse * 1e3},
+                              {"see_through", r.see_through},
+                              {"unseen", r.unseen},
+                              {"right", t_err <= o.max_t_mm * 1e-3 && r_err <= o.max_r_deg * kDeg}});
+  }
   sj["cluster_sizes"] = json::array();
   for (const auto& c : clusters) sj["cluster_sizes"].push_back(c.size());
   sj["points"] = cloud.size();

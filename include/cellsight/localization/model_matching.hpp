@@ -77,6 +77,13 @@ struct MatchingConfig {
   /// at least this share of the best, up to twice refine_candidates (a part seen mostly by one
   /// flat face: many poses explain nearly every point, and the cut would fall among them). 0: off.
   double refine_candidates_near = 0.95;
+  /// PPF with a support plane: this many distinct poses of the model lying on the support in one
+  /// of its stable rests (rest_poses.hpp) are refined besides the PPF candidates (a part lying on
+  /// a side whose point pairs never vote for its pose). Each rest is turned about the support's
+  /// normal in rest_yaw_step steps, centred on the cluster, brought in by a short ICP and scored
+  /// on the distance field like a PPF vote. 0: off.
+  int rest_candidates = 0;
+  double rest_yaw_step = 0.2617993877991494;  ///< rad (15°)
   double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
   int icp_iterations = 40;
   double icp_max_points = 4000;    ///< scene points used by the final ICP (thinned evenly above this)
@@ -189,7 +196,8 @@ struct PartDetection {
   /// (free-space violation; 0 when locate() had no support points)
   double see_through = 0;
   /// share of the model's visible points the scan should have measured and did not (see
-  /// MatchingConfig::max_unseen; computed for poses that pass every other test, with a light sweep)
+  /// MatchingConfig::max_unseen; computed for poses that pass every other test, the fitness test at
+  /// half of min_fitness, with a light sweep; 0 otherwise)
   double unseen = 0;
   double score = 0;      ///< fitness × coverage (ranking)
   int cluster = -1;      ///< index of the input cluster

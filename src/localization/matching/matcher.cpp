@@ -44,8 +44,12 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
     out->coverage = coverage(s, m, T, cfg.fitness_radius);
     out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
     out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
-    out->unseen = 0;  // traced for a pose that passes every other test only (rays through the scan)
-    if (s.light && accepted(*out, cfg)) visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
+    // traced (rays through the scan) for a pose that passes every other test, the fitness test at
+    // half its floor: a refused pose reports it too (MatchStats::rejected)
+    out->unseen = 0;
+    const bool others = out->score > 0 && out->fitness >= 0.5 * cfg.min_fitness && out->coverage >= cfg.min_coverage &&
+                        out->rmse <= cfg.max_rmse && out->see_through <= cfg.max_see_through;
+    if (s.light && others) visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
   };
   score(r.T, c);
   if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {
@@ -261,6 +265,7 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
     if (m->has_mesh) m->caster.addMesh(e.mesh, Eigen::Isometry3d::Identity());
     m->caster.commit();
     if (m->has_mesh) m->patches = facePatches(e.mesh, m->faces, patchMinArea(config_));
+    addRests(*m);
     addLearned(*m);
     std::lock_guard<std::mutex> lock(mutex_);
     return indices_.emplace(id, m).first->second;
@@ -353,6 +358,7 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
   m->caster.commit();
   if (m->has_mesh) m->faces = planarFaces(e.mesh);
   if (m->has_mesh) m->patches = facePatches(e.mesh, m->faces, patchMinArea(config_));
+  addRests(*m);
   if (m->has_mesh && config_.icp_mesh_polish && config_.closest_point_grid && e.mesh.faces.size() <= 5000) {
     const float dmin = static_cast<float>(std::max(3 * config_.icp_spacing, 0.5 * config_.fitness_radius));
     const float cell = static_cast<float>(std::max(2 * config_.icp_spacing, 0.001));

@@ -96,6 +96,10 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("inlier_distance", c.inlier_distance);
   atLeast("refine_candidates", c.refine_candidates, 1);
   share("refine_candidates_near", c.refine_candidates_near);
+  c.rest_candidates = m.getInt("rest_candidates", c.rest_candidates);
+  if (c.rest_candidates < 0 || c.rest_candidates > 64) m.fail("rest_candidates", "must be in [0, 64] (0: off)");
+  c.rest_yaw_step = m.getDouble("rest_yaw_step", c.rest_yaw_step);
+  if (!(c.rest_yaw_step >= 0.01 && c.rest_yaw_step <= M_PI)) m.fail("rest_yaw_step", "must be in [0.01, pi] rad");
   positive("icp_spacing", c.icp_spacing);
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);

@@ -24,6 +24,7 @@
 #include "cellsight/common/scan_cloud.hpp"
 #include "cellsight/localization/model_library.hpp"
 #include "cellsight/localization/model_matching.hpp"
+#include "cellsight/localization/rest_poses.hpp"
 
 namespace cellsight {
 namespace matching_detail {
@@ -148,6 +149,8 @@ struct ModelMatcher::ModelIndex {
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
   float diameter = 0;
   std::vector<Eigen::Vector3f> extremes;  // mesh vertices (cloud models: coarse points), for the support test
+  std::vector<RestPose> rests;            // how it can lie on a table (rest hypotheses; none for a sphere)
+  std::vector<Eigen::Vector2f> rest_top;  // per rest: the in-plane centroid of its upward faces (rest frame)
 };
 
 namespace matching_detail {
@@ -249,7 +252,10 @@ std::vector<Hypothesis> planarHypotheses(const SceneData& s, const ModelMatcher:
 /// The point pair feature table of a model cloud with normals (features shared by more than
 /// max_bucket pairs left out).
 PpfTable buildPpf(const ScanCloud& c, float dist_step, int bins, size_t max_bucket);
-/// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
+/// The model's stable rests (rest_poses.hpp) and, per rest, where its upward faces lie.
+void addRests(ModelMatcher::ModelIndex& m);
+/// PPF candidates → best `refine_candidates` distinct poses by their distance-field score; with
+/// a support plane and rest_candidates, the best distinct poses of the model resting on it too.
 std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                                       const Eigen::Vector4f* support, int* iterations);
 

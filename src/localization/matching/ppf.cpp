@@ -1,5 +1,6 @@
 // Coarse stage "ppf": the model's point pair feature table (Drost et al. 2010), voting over
 // the scene's point pairs, and the best-voted poses scored on the distance field.
+#include <algorithm>
 #include <numeric>
 #include <random>
 
@@ -10,6 +11,8 @@ namespace {
 
 /// Cluster points of the short ICP that brings a laid face in before it is scored.
 constexpr size_t kPlanarIcpPoints = 200;
+/// Iterations of the short ICP that brings a rest hypothesis in before it is scored.
+constexpr int kRestIcpIterations = 10;
 
 /// atan2 to within 2e-6 rad of std::atan2 (measured over 300 000 angles; a minimax polynomial on
 /// [0, 1] and octant folding): PPF angles are binned in 12° steps, so libm's exactness only
@@ -221,6 +224,76 @@ std::vector<Hypothesis> planarHypotheses(const SceneData& s, const ModelMatcher:
   return out;
 }
 
+void addRests(ModelMatcher::ModelIndex& m) {
+  m.rests.clear();
+  m.rest_top.clear();
+  // a sphere rests every way (its centre is found directly)
+  if (m.info.symmetry.type == Symmetry::Type::kSpherical || !m.fine) return;
+  std::vector<Eigen::Vector3d> v;
+  v.reserve(m.extremes.size());
+  for (const auto& p : m.extremes) v.push_back(p.cast<double>());
+  m.rests = stableRests(v, m.centroid);
+  for (const RestPose& r : m.rests) {
+    // what a camera above the table sees of it: the faces turned up
+    const Eigen::Matrix3f R = r.R.cast<float>();
+    Eigen::Vector2f c = Eigen::Vector2f::Zero();
+    int n = 0;
+    for (size_t i = 0; i < m.fine->size(); ++i) {
+      if ((R * m.fine->normals[i]).z() < 0.5f) continue;
+      c += (R * m.fine->points[i]).head<2>();
+      ++n;
+    }
+    m.rest_top.push_back(n > 0 ? Eigen::Vector2f(c / static_cast<float>(n)) : Eigen::Vector2f::Zero());
+  }
+}
+
+namespace {
+
+/// Poses of the model lying in each of its stable rests on the support (normal: up), turned about
+/// the normal in `step` steps, the centroid of its upward faces on the cluster's, each brought
+/// in by a short ICP.
+std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                                       const Eigen::Vector4f& support) {
+  std::vector<Hypothesis> out;
+  const Vec3 n = support.head<3>().normalized();
+  if (m.rests.empty() || !n.allFinite() || s.coarse.points.empty()) return out;
+  Vec3 centre = Vec3::Zero();
+  size_t k = 0;
+  for (const auto& p : s.coarse.points) {
+    if (!p.allFinite()) continue;
+    centre += p;
+    ++k;
+  }
+  if (k == 0) return out;
+  centre /= static_cast<float>(k);
+  // the table's frame: x, y in its plane, z its normal; origin: the cluster's centre on the plane
+  Eigen::Matrix3f Q;
+  Q.col(2) = n;
+  Q.col(0) = (std::abs(n.x()) < 0.9f ? Vec3::UnitX() : Vec3::UnitY()).cross(n).normalized();
+  Q.col(1) = n.cross(Q.col(0));
+  const Vec3 origin = centre - (n.dot(centre) + support.w() / support.head<3>().norm()) * n;
+  const int steps = std::max(1, static_cast<int>(std::lround(2 * M_PI / cfg.rest_yaw_step)));
+  MatchingConfig short_icp = cfg;  // a turn half a step off comes in within a few iterations
+  short_icp.icp_iterations = std::min(cfg.icp_iterations, kRestIcpIterations);
+  for (size_t r = 0; r < m.rests.size(); ++r) {
+    const Eigen::Matrix3f Rr = m.rests[r].R.cast<float>();
+    for (int i = 0; i < steps; ++i) {
+      const Eigen::Matrix3f Rz = Eigen::AngleAxisf(static_cast<float>(2 * M_PI * i / steps), Vec3::UnitZ()).toRotationMatrix();
+      Hypothesis h;
+      h.T.linear() = Q * Rz * Rr;
+      const Eigen::Vector2f top = Rz.topLeftCorner<2, 2>() * m.rest_top[r];
+      h.T.translation() = origin + Q * Vec3(-top.x(), -top.y(), static_cast<float>(m.rests[r].height));
+      const Refined f = icp(s, m, h.T, short_icp, kPlanarIcpPoints, false);
+      if (!f.T.matrix().allFinite()) continue;
+      h.T = f.T;
+      out.push_back(h);
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
 /// PPF candidates → best `refine_candidates` distinct poses by their distance-field score.
 std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                                       const Eigen::Vector4f* support, int* iterations) {
@@ -275,6 +348,26 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
          top[n].score >= cfg.refine_candidates_near * top[0].score)
     ++n;
   top.resize(n);
+  if (support && cfg.rest_candidates > 0) {
+    // the part lying on the support: a separate quota, so that no PPF candidate gives way
+    std::vector<Hypothesis> rest;
+    for (auto& v : restHypotheses(s, m, cfg, *support)) {
+      if (offSupport(m, v.T, *support, cfg, slack)) continue;
+      v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), probe, 0.5 * best_score / static_cast<double>(order.size()));
+      best_score = std::max(best_score, v.score);
+      auto near = [&](const Hypothesis& h) { return !distinct(h.T, v.T, static_cast<float>(2 * cfg.inlier_distance)); };
+      if (std::any_of(top.begin(), top.end(), near)) continue;  // PPF refines that pose already
+      auto same = std::find_if(rest.begin(), rest.end(), near);
+      if (same == rest.end()) {
+        rest.push_back(v);
+      } else if (v.score > same->score) {
+        *same = v;
+      }
+    }
+    std::sort(rest.begin(), rest.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
+    if (rest.size() > static_cast<size_t>(cfg.rest_candidates)) rest.resize(cfg.rest_candidates);
+    top.insert(top.end(), rest.begin(), rest.end());
+  }
   return top;
 }
 
