@@ -11,9 +11,17 @@ LOG="$OUTPUT.launch.log"
 rm -f "$OUTPUT"
 roslaunch -p "${ROS_MASTER_URI##*:}" cellsight replay.launch bag:="$BAG" output_file:="$OUTPUT" >"$LOG" 2>&1 &
 LAUNCH_PID=$!
-trap 'kill -INT $LAUNCH_PID 2>/dev/null; wait $LAUNCH_PID 2>/dev/null || true' EXIT
-# the EXIT trap only stops roslaunch (its `|| true`: it may be gone already); the result is the
-# finisher's clean exit within 300 s and the cloud it wrote, both checked below
+# on exit roslaunch is stopped (it may be gone already: how it ends is not the result) and the
+# script leaves with its own status; the result is the finisher's clean exit within 300 s and the
+# cloud it wrote, both checked below
+stop_launch() {
+  local rc=$?
+  set +e
+  kill -INT "$LAUNCH_PID" 2>/dev/null
+  wait "$LAUNCH_PID" 2>/dev/null
+  exit "$rc"
+}
+trap stop_launch EXIT
 finished=0
 for _ in $(seq 1200); do
   if grep -q "replay_finisher-[0-9]*\] process has finished cleanly" "$LOG"; then

@@ -24,16 +24,20 @@ mkdir -p "$OUT/logs"
 TOOLS="$CELLSIGHT_BUILD/devel/lib/cellsight"
 LAUNCH_PID=""
 # roslaunch ignores an INT that comes before it has set up its handlers: INT, then TERM, then KILL
+# (how roslaunch ends is not a result: the kills and the wait may fail, errexit is off meanwhile)
 stop_launch() {
   [ -n "$LAUNCH_PID" ] || return 0
-  kill -INT "$LAUNCH_PID" 2>/dev/null || true
+  local errexit=$-
+  set +e
+  kill -INT "$LAUNCH_PID" 2>/dev/null
   for _ in $(seq 60); do kill -0 "$LAUNCH_PID" 2>/dev/null || break; sleep 0.5; done
   if kill -TERM "$LAUNCH_PID" 2>/dev/null; then
     sleep 5
-    kill -KILL "$LAUNCH_PID" 2>/dev/null || true
+    kill -KILL "$LAUNCH_PID" 2>/dev/null
   fi
-  wait "$LAUNCH_PID" 2>/dev/null || true
+  wait "$LAUNCH_PID" 2>/dev/null
   LAUNCH_PID=""
+  [[ $errexit == *e* ]] && set -e
   return 0
 }
 cleanup() { stop_launch; }
