@@ -420,7 +420,13 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   // every pose validation refused (the best per cluster and model), and whether it was right:
   // the figures right and wrong poses reach, for choosing acceptance thresholds on tuning cells
   sj["rejected"] = json::array();
+  std::vector<const PartDetection*> listed;  // a cluster searched again (half the coverage) refuses the same pose twice
   for (const auto& r : st.rejected) {
+    if (std::any_of(listed.begin(), listed.end(), [&](const PartDetection* l) {
+          return l->model == r.model && l->cluster == r.cluster && l->pose.isApprox(r.pose, 1e-9);
+        }))
+      continue;
+    listed.push_back(&r);
     double t_err = 1e9, r_err = 1e9;
     for (const auto& o : scene.objects) {
       if (o.model != r.model) continue;

@@ -47,9 +47,7 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
     // traced (rays through the scan) for a pose that passes every other test, the fitness test at
     // half its floor: a refused pose reports it too (MatchStats::rejected)
     out->unseen = 0;
-    const bool others = out->score > 0 && out->fitness >= 0.5 * cfg.min_fitness && out->coverage >= cfg.min_coverage &&
-                        out->rmse <= cfg.max_rmse && out->see_through <= cfg.max_see_through;
-    if (s.light && others) visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
+    if (s.light && accepted(*out, cfg, 0.5 * cfg.min_fitness)) visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
   };
   score(r.T, c);
   if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {

@@ -307,6 +307,8 @@ bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, c
                 const MatchingConfig& cfg, float slack = 0.f);
 /// The detection passes min_fitness, min_coverage, max_rmse, max_see_through and max_unseen.
 bool accepted(const PartDetection& d, const MatchingConfig& cfg);
+/// ... with this fitness floor instead of min_fitness.
+bool accepted(const PartDetection& d, const MatchingConfig& cfg, double min_fitness);
 
 }  // namespace matching_detail
 }  // namespace cellsight

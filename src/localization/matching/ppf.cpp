@@ -327,20 +327,25 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
   const size_t keep = static_cast<size_t>(std::max(1, cfg.refine_candidates));
   // a coarse pose may be a few millimetres off: only clearly sunken or floating ones are dropped here
   const float slack = static_cast<float>(2 * cfg.inlier_distance);
-  for (auto& v : votes) {
-    if (support && offSupport(m, v.T, *support, cfg, slack)) continue;
+  // scored on the distance field; false for a pose clearly off the support
+  auto score = [&](Hypothesis& v) {
+    if (support && offSupport(m, v.T, *support, cfg, slack)) return false;
     v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), probe, 0.5 * best_score / static_cast<double>(order.size()));
     best_score = std::max(best_score, v.score);
-    bool merged = false;
-    for (auto& h : top) {
-      if (!distinct(h.T, v.T, static_cast<float>(2 * cfg.inlier_distance))) {
-        if (v.score > h.score) h = v;
-        merged = true;
-        break;
-      }
+    return true;
+  };
+  const float dt = static_cast<float>(2 * cfg.inlier_distance);
+  // a pose near one already listed replaces it if it scores higher; a distinct one is added
+  auto merge = [&](std::vector<Hypothesis>& list, const Hypothesis& v) {
+    auto same = std::find_if(list.begin(), list.end(), [&](const Hypothesis& h) { return !distinct(h.T, v.T, dt); });
+    if (same == list.end()) {
+      list.push_back(v);
+    } else if (v.score > same->score) {
+      *same = v;
     }
-    if (!merged) top.push_back(v);
-  }
+  };
+  for (auto& v : votes)
+    if (score(v)) merge(top, v);
   std::sort(top.begin(), top.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
   // near-ties past the cut are kept too (a flat face explains nearly every point in many poses)
   size_t n = std::min(keep, top.size());
@@ -352,17 +357,10 @@ std::vector<Hypothesis> ppfHypotheses(const SceneData& s, const ModelMatcher::Mo
     // the part lying on the support: a separate quota, so that no PPF candidate gives way
     std::vector<Hypothesis> rest;
     for (auto& v : restHypotheses(s, m, cfg, *support)) {
-      if (offSupport(m, v.T, *support, cfg, slack)) continue;
-      v.score = scoreHypothesis(s, order, m, v.T, inl2, std::cos(0.8f), probe, 0.5 * best_score / static_cast<double>(order.size()));
-      best_score = std::max(best_score, v.score);
-      auto near = [&](const Hypothesis& h) { return !distinct(h.T, v.T, static_cast<float>(2 * cfg.inlier_distance)); };
-      if (std::any_of(top.begin(), top.end(), near)) continue;  // PPF refines that pose already
-      auto same = std::find_if(rest.begin(), rest.end(), near);
-      if (same == rest.end()) {
-        rest.push_back(v);
-      } else if (v.score > same->score) {
-        *same = v;
-      }
+      if (!score(v)) continue;
+      // PPF refines that pose already
+      if (std::any_of(top.begin(), top.end(), [&](const Hypothesis& h) { return !distinct(h.T, v.T, dt); })) continue;
+      merge(rest, v);
     }
     std::sort(rest.begin(), rest.end(), [](const Hypothesis& a, const Hypothesis& b) { return a.score > b.score; });
     if (rest.size() > static_cast<size_t>(cfg.rest_candidates)) rest.resize(cfg.rest_candidates);

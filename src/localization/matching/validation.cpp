@@ -206,8 +206,10 @@ bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, c
   return cfg.max_support_gap > 0 && -below > static_cast<float>(cfg.max_support_gap) + slack;
 }
 
-bool accepted(const PartDetection& d, const MatchingConfig& cfg) {
-  return d.score > 0 && d.fitness >= cfg.min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse &&
+bool accepted(const PartDetection& d, const MatchingConfig& cfg) { return accepted(d, cfg, cfg.min_fitness); }
+
+bool accepted(const PartDetection& d, const MatchingConfig& cfg, double min_fitness) {
+  return d.score > 0 && d.fitness >= min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse &&
          d.see_through <= cfg.max_see_through && d.unseen <= cfg.max_unseen;
 }
 
