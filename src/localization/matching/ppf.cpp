@@ -250,7 +250,7 @@ void addRests(ModelMatcher::ModelIndex& m) {
 namespace {
 
 /// Poses of the model lying in each of its stable rests on the support (normal: up), turned about
-/// the normal in `step` steps, the centroid of its upward faces on the cluster's, each brought
+/// the normal in rest_yaw_step steps, the centroid of its upward faces on the cluster's, each brought
 /// in by a short ICP.
 std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                                        const Eigen::Vector4f& support) {
