@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace cellsight {
 namespace {
@@ -31,13 +32,14 @@ std::vector<Vec2> convexHull2d(std::vector<Vec2> p) {
   return h;
 }
 
-bool insideBy(const std::vector<Vec2>& poly, const Vec2& q, double margin) {
-  if (poly.size() < 3) return false;
+double insideMargin(const std::vector<Vec2>& poly, const Vec2& q) {
+  if (poly.size() < 3) return -std::numeric_limits<double>::infinity();
+  double m = std::numeric_limits<double>::infinity();
   for (size_t i = 0; i < poly.size(); ++i) {
     const Vec2 a = poly[i], b = poly[(i + 1) % poly.size()];
-    if (cross(a, b, q) / (b - a).norm() < margin) return false;
+    m = std::min(m, cross(a, b, q) / (b - a).norm());
   }
-  return true;
+  return m;
 }
 
 Eigen::Matrix3d rotationBetween(const Eigen::Vector3d& from, const Eigen::Vector3d& to) {

@@ -90,12 +90,8 @@ std::vector<RestPose> stableRests(const std::vector<Eigen::Vector3d>& vertices, 
       if (v.allFinite() && f.n.dot(v) > f.offset - 1e-6 * size) on.push_back((r.R * v).head<2>());
     const std::vector<Eigen::Vector2d> poly = convexHull2d(on);
     const Eigen::Vector2d c = (r.R * centre).head<2>();
-    if (!insideBy(poly, c, min_margin)) continue;
-    r.margin = std::numeric_limits<double>::infinity();
-    for (size_t i = 0; i < poly.size(); ++i) {
-      const Eigen::Vector2d e = poly[(i + 1) % poly.size()] - poly[i], d = c - poly[i];
-      r.margin = std::min(r.margin, (e.x() * d.y() - e.y() * d.x()) / e.norm());
-    }
+    r.margin = insideMargin(poly, c);
+    if (!(r.margin >= min_margin)) continue;
     r.height = f.offset;  // the facet lies at z = −offset after the turn
     r.area = f.area;
     out.push_back(r);

@@ -10,9 +10,15 @@ namespace cellsight {
 /// three points come back as given.
 std::vector<Eigen::Vector2d> convexHull2d(std::vector<Eigen::Vector2d> points);
 
+/// How far q lies inside a counter-clockwise convex polygon: its least distance to an edge's
+/// line, negative outside (−infinity for fewer than three corners).
+double insideMargin(const std::vector<Eigen::Vector2d>& polygon, const Eigen::Vector2d& q);
+
 /// Whether q lies inside a counter-clockwise convex polygon by at least `margin` (false for
 /// fewer than three corners).
-bool insideBy(const std::vector<Eigen::Vector2d>& polygon, const Eigen::Vector2d& q, double margin);
+inline bool insideBy(const std::vector<Eigen::Vector2d>& polygon, const Eigen::Vector2d& q, double margin) {
+  return insideMargin(polygon, q) >= margin;
+}
 
 /// Rotation taking unit vector `from` onto unit vector `to` (opposite vectors: a half turn about
 /// an axis across `from`; Eigen's FromTwoVectors gave NaN there in an optimised build).
