@@ -128,7 +128,8 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
                                 static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
   // the sheet frame by frame as the scanner knows it (reported flange poses, calibrated laser)
   const LightSweep light = LightSweep::fromFlangePoses(m.sweep.poses, m.cal.T_flange_laser, m.settings.laser_fan_angle / 2);
-  auto found = m.matcher->locate(clusters, {}, nullptr, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, &light);
+  auto found = m.matcher->locate(clusters, {}, nullptr, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, &light,
+                                 &cr.fragments);
   rep.locate_seconds = now() - t0;
   if (!m.refine_sweep.poses.empty()) {
     // the second pass: its own image noise (another seed space), its own robot moves

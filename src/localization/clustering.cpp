@@ -132,12 +132,19 @@ ClusteringResult clusterScene(const ScanCloud& scene, const ClusteringConfig& cf
   std::vector<pcl::PointIndices> found;
   pcl::EuclideanClusterExtraction<PointT> ec;
   ec.setClusterTolerance(cfg.cluster_tolerance);
-  ec.setMinClusterSize(cfg.min_cluster_points);
+  ec.setMinClusterSize(1);  // the small groups are kept as fragments
   ec.setMaxClusterSize(cfg.max_cluster_points);
   ec.setSearchMethod(tree);
   ec.setInputCloud(space);
   ec.extract(found);
   for (const auto& idx : found) {
+    if (idx.indices.size() < static_cast<size_t>(cfg.min_cluster_points)) {
+      for (int i : idx.indices) {
+        const auto& p = (*cloud)[static_cast<size_t>(i)];
+        r.fragments.emplace_back(p.x, p.y, p.z);
+      }
+      continue;
+    }
     SceneCluster c;
     c.cloud.frame_id = scene.frame_id;
     for (int i : idx.indices) {

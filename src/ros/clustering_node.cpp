@@ -45,6 +45,10 @@ class Clustering {
       for (const auto& p : r.support_points) seen.append(p, 0.f);
       out.support_points = cellsight_ros::toCloudMsg(seen, msg->header.stamp);
       out.support_points.header.frame_id = msg->header.frame_id;
+      cellsight::ScanCloud fragments;
+      for (const auto& p : r.fragments) fragments.append(p, 0.f);
+      out.fragments = cellsight_ros::toCloudMsg(fragments, msg->header.stamp);
+      out.fragments.header.frame_id = msg->header.frame_id;
       out.input_points = static_cast<uint32_t>(r.input_points);
       out.points_above_support = static_cast<uint32_t>(r.after_plane);
       out.warnings = r.warnings;

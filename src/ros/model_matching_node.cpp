@@ -226,10 +226,18 @@ class ModelMatching {
         out->warnings.push_back(std::string("support_points unreadable, no free-space test: ") + e.what());
       }
     }
+    std::vector<Eigen::Vector3f> fragments;
+    if (msg.fragments.width * msg.fragments.height > 0) {
+      try {
+        fragments = cellsight_ros::fromCloudMsg(msg.fragments).points;
+      } catch (const std::exception& e) {
+        out->warnings.push_back(std::string("fragments unreadable, the fitness counts the clusters only: ") + e.what());
+      }
+    }
     const std::unique_ptr<cellsight::LightSweep> light =
         matcher_->config().check_illumination ? sweepFor(msg, &out->warnings) : nullptr;
     const auto dets = matcher_->locate(clusters, models, &stats, &eye, use_support ? &support : nullptr,
-                                       seen.empty() ? nullptr : &seen, light.get());
+                                       seen.empty() ? nullptr : &seen, light.get(), &fragments);
     out->header = msg.header;
     out->clusters = static_cast<uint32_t>(clusters.size());
     out->locate_seconds = stats.seconds;

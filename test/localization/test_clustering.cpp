@@ -60,6 +60,23 @@ TEST(Clustering, ThreeBoxesOnATable) {
   }
 }
 
+// A group of points smaller than min_cluster_points is not a cluster but stays as fragments:
+// the matcher counts them as measured surface.
+TEST(Clustering, SmallGroupsAreKeptAsFragments) {
+  ClusteringConfig cfg;
+  ScanCloud scene = syntheticScene(3);
+  EXPECT_TRUE(clusterScene(scene, cfg).fragments.empty());
+  for (float x = 0.46f; x < 0.4645f; x += 0.001f)  // a 5 x 5 mm patch at 5 mm, 25 points
+    for (float y = -0.08f; y < -0.0755f; y += 0.001f) scene.append({x, y, 0.005f}, 90.f);
+  const ClusteringResult r = clusterScene(scene, cfg);
+  EXPECT_EQ(r.clusters.size(), 3u);
+  ASSERT_GE(r.fragments.size(), 16u);  // the voxel grid may merge a few
+  EXPECT_LE(r.fragments.size(), 25u);
+  for (const auto& p : r.fragments) EXPECT_NEAR(p.z(), 0.005f, 1e-4f);
+  cfg.min_cluster_points = 20;  // ... which is a cluster when it is large enough
+  EXPECT_EQ(clusterScene(scene, cfg).clusters.size(), 4u);
+}
+
 TEST(Clustering, BadCloudsGiveAClearEmptyResult) {
   ClusteringConfig cfg;
   ClusteringResult r = clusterScene(ScanCloud(), cfg);

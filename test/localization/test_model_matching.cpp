@@ -5,9 +5,11 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <sstream>
 
 #include "cellsight/common/errors.hpp"
 #include "cellsight/common/raycaster.hpp"
+#include "cellsight/localization/light_sweep.hpp"
 #include "cellsight/localization/localization_eval.hpp"
 #include "cellsight/localization/model_matching.hpp"
 #include "cellsight/localization/rest_poses.hpp"
@@ -351,6 +353,49 @@ TEST(ModelMatching, APartSplitBetweenTwoClustersIsFoundOnceWhole) {
   for (const auto& d : pieces) std::printf(" %.3f", d.fitness);
   std::printf(" (%zu found)\n", pieces.size());
   for (const auto& d : pieces) EXPECT_LT(d.fitness, one[0].fitness - 0.2);
+}
+
+// A piece of a part's scan too small to be a cluster (the top of a standing bracket's foot) is
+// a fragment: never searched, but surface the scan measured, so the part's fitness counts it.
+// Fragments that are not finite or lie far from every cluster are left out.
+TEST(ModelMatching, FragmentsCountInTheFitness) {
+  const Eigen::Isometry3d truth = onTable(0.47, -0.02, 0.7);
+  const ScanCloud view = singleViewCloud(library()->model("housing").mesh, truth, kEye, 0.001, 2e-5, 61);
+  std::vector<float> xs;
+  for (const auto& p : view.points) xs.push_back(p.x());
+  std::nth_element(xs.begin(), xs.begin() + xs.size() * 80 / 100, xs.end());
+  const float cut = xs[xs.size() * 80 / 100];
+  ScanCloud cluster;
+  std::vector<Eigen::Vector3f> fragments;
+  for (const auto& p : view.points) {
+    if (p.x() < cut) {
+      cluster.append(p, 1.f);
+    } else {
+      fragments.push_back(p);
+    }
+  }
+  ModelMatcher m(library(), config());
+  const auto one = m.locate({view}, {"housing"});
+  const auto alone = m.locate({cluster}, {"housing"});
+  const auto with = m.locate({cluster}, {"housing"}, nullptr, nullptr, nullptr, nullptr, nullptr, &fragments);
+  ASSERT_EQ(one.size(), 1u);
+  ASSERT_EQ(alone.size(), 1u);
+  ASSERT_EQ(with.size(), 1u);
+  std::printf("fitness: whole view %.3f, 80 %% of it %.3f, with the rest as fragments %.3f\n", one[0].fitness,
+              alone[0].fitness, with[0].fitness);
+  EXPECT_LT(alone[0].fitness, one[0].fitness - 0.1);
+  EXPECT_NEAR(with[0].fitness, one[0].fitness, 0.03);
+  const PoseError e = poseError(library()->model("housing").info, m.centroid("housing"), with[0].pose, truth);
+  EXPECT_LT(e.translation, 1e-3);
+  auto broken = fragments;
+  broken.push_back(Eigen::Vector3f::Constant(NAN));
+  broken.push_back(Eigen::Vector3f(1e4f, 1e4f, 0.f));
+  const auto odd = m.locate({cluster}, {"housing"}, nullptr, nullptr, nullptr, nullptr, nullptr, &broken);
+  ASSERT_EQ(odd.size(), 1u);
+  EXPECT_NEAR(odd[0].fitness, with[0].fitness, 1e-9);
+  // fragments alone are never searched
+  ScanCloud empty;
+  EXPECT_TRUE(m.locate({empty}, {"housing"}, nullptr, nullptr, nullptr, nullptr, nullptr, &fragments).empty());
 }
 
 // The top of a sphere as the simulated scanner saw it in generated cell 3034 (its side went to

@@ -44,6 +44,10 @@ struct ClusteringResult {
   /// where the scan saw the support: its inliers, one per 2 mm cell (the matcher's free-space
   /// test: a part cannot stand where the camera saw the table behind it)
   std::vector<Eigen::Vector3f> support_points;
+  /// the points above the support in groups smaller than min_cluster_points: not searched, but
+  /// measured surface all the same (a bracket standing on its side shows its top face and, apart
+  /// from it, the top of its foot): the matcher's fitness and unseen tests count them
+  std::vector<Eigen::Vector3f> fragments;
   size_t input_points = 0, after_crop = 0, after_voxel = 0, after_plane = 0, non_finite = 0;
   std::vector<std::string> warnings;  ///< e.g. empty input, downsampled huge input
 };

@@ -134,8 +134,8 @@ struct MatchingConfig {
   /// reached the point: facing the emitter within max_view_angle, not shadowed by the part
   /// itself. A part lying on its side shadows most of what the camera sees of it.
   bool check_illumination = true;
-  /// Fitness counts scan points of every cluster of the locate() call (false: only the matched
-  /// cluster's): a part that clustering split is not short of its own points.
+  /// Fitness counts scan points of every cluster of the locate() call and its fragments (false:
+  /// only the matched cluster's): a part that clustering split is not short of its own points.
   bool fitness_whole_scan = true;
   /// Parts rest on a support (the table the clustering removed): a pose that puts the model more
   /// than this below the support plane is not physical and is discarded before validation
@@ -273,12 +273,15 @@ class ModelMatcher {
   /// max_support_penetration, max_support_gap). `support_points` (scene frame), the points of
   /// the support the scan saw, with the plane, turn on the free-space test (max_see_through).
   /// `light` (scene frame), the scan's light sheet frame by frame, turns on the illumination
-  /// test of the fitness (check_illumination).
+  /// test of the fitness (check_illumination). `fragments` (scene frame), points the scan
+  /// measured above the support that are in no cluster (ClusteringResult::fragments), are never
+  /// searched but count, with fitness_whole_scan, in the fitness and unseen tests of every pose.
   std::vector<PartDetection> locate(const std::vector<ScanCloud>& clusters, const std::vector<std::string>& models,
                                 MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
                                 const Eigen::Vector4f* support_plane = nullptr,
                                 const std::vector<Eigen::Vector3f>* support_points = nullptr,
-                                const LightSweep* light = nullptr) const;
+                                const LightSweep* light = nullptr,
+                                const std::vector<Eigen::Vector3f>* fragments = nullptr) const;
 
   /// Refines located parts (poses as locate() gives them) on another scan of the same cell, its
   /// points above the support (e.g. the clusters of clusterScene, joined): a second pass, e.g.

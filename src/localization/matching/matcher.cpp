@@ -17,6 +17,10 @@ namespace {
 /// Screened candidates polished per (cluster, model) pair.
 constexpr size_t kPolished = 2;
 
+/// Fragments (unclustered scan points) farther than this from every cluster's box are not
+/// evidence for any pose (m): beyond the largest part a cell holds.
+constexpr float kFragmentReach = 0.25f;
+
 /// Flat faces smaller than this are not laid onto planar clusters: 25 coarse cells.
 float patchMinArea(const MatchingConfig& cfg) { return static_cast<float>(25 * cfg.voxel * cfg.voxel); }
 
@@ -386,7 +390,8 @@ Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return 
 std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
                                             const std::vector<std::string>& models_in, MatchStats* stats,
                                             const Eigen::Vector3f* viewpoint, const Eigen::Vector4f* support_plane,
-                                            const std::vector<Eigen::Vector3f>* support_points, const LightSweep* light) const {
+                                            const std::vector<Eigen::Vector3f>* support_points, const LightSweep* light,
+                                            const std::vector<Eigen::Vector3f>* fragments) const {
   const auto t0 = Clock::now();
   MatchStats local;
   MatchStats& st = stats ? *stats : local;
@@ -434,10 +439,23 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     round.push_back(std::move(w));
   }
   // the fitness test sees every cluster's points: a part that clustering split between two
-  // clusters is matched in one and explains its model's points in both
+  // clusters is matched in one and explains its model's points in both; and the fragments, the
+  // pieces of scanned surface too small to be clusters (the top of a standing bracket's foot)
+  // (only those near the clusters: evidence matters where a pose can lie, and a stray point
+  // far away would only stretch the grid)
+  std::vector<Vec3> pieces;
+  if (fragments && !round.empty()) {
+    Eigen::AlignedBox3f near;
+    for (const auto& w : round)
+      for (const auto& p : w.points) near.extend(p);
+    near.min().array() -= kFragmentReach;
+    near.max().array() += kFragmentReach;
+    for (const auto& p : *fragments)
+      if (p.allFinite() && near.contains(p)) pieces.push_back(p);
+  }
   PointGrid whole;
-  if (cfg.fitness_whole_scan && round.size() > 1) {
-    std::vector<Vec3> all;
+  if (cfg.fitness_whole_scan && !round.empty() && (round.size() > 1 || !pieces.empty())) {
+    std::vector<Vec3> all = std::move(pieces);
     for (const auto& w : round) all.insert(all.end(), w.points.begin(), w.points.end());
     whole = PointGrid(all, static_cast<float>(cfg.fitness_radius));
   }
