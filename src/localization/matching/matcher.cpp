@@ -54,7 +54,11 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
     if (s.light && accepted(*out, cfg, 0.5 * cfg.min_fitness)) visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
   };
   score(r.T, c);
-  if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(*c, cfg)) {
+  // the unseen share is not asked before centring: a pose left a millimetre off across a narrow
+  // face claims surface past the face's scanned edge, and is measured again where it settles
+  PartDetection before = *c;
+  before.unseen = 0;
+  if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(before, cfg)) {
     const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, r.polished_fresh, cfg).inverse()).cast<float>();
     PartDetection centred;
     if (T.matrix().allFinite() && !(support && offSupport(m, T, *support, cfg))) {
