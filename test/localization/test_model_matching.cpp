@@ -372,18 +372,31 @@ TEST(ModelMatching, TwoTouchingPartsInOneClusterAreBothFound) {
   }
 }
 
+namespace {
+/// A housing's single view cut across x: `percent` of its points below the cut, the rest above.
+struct SplitView {
+  Eigen::Isometry3d truth = onTable(0.47, -0.02, 0.7);
+  ScanCloud whole, below, above;
+};
+SplitView splitHousingView(size_t percent) {
+  SplitView v;
+  v.whole = singleViewCloud(library()->model("housing").mesh, v.truth, kEye, 0.001, 2e-5, 61);
+  std::vector<float> xs;
+  for (const auto& p : v.whole.points) xs.push_back(p.x());
+  std::nth_element(xs.begin(), xs.begin() + xs.size() * percent / 100, xs.end());
+  const float cut = xs[xs.size() * percent / 100];
+  for (const auto& p : v.whole.points) (p.x() < cut ? v.below : v.above).append(p, 1.f);
+  return v;
+}
+}  // namespace
+
 // Clustering can split a part (a gap in the scan across it): each piece is matched on its own
 // cluster, but the fitness counts the scan points of every cluster, so the part is found at its
 // full fitness, and only once.
 TEST(ModelMatching, APartSplitBetweenTwoClustersIsFoundOnceWhole) {
-  const Eigen::Isometry3d truth = onTable(0.47, -0.02, 0.7);
-  const ScanCloud view = singleViewCloud(library()->model("housing").mesh, truth, kEye, 0.001, 2e-5, 61);
-  std::vector<float> xs;
-  for (const auto& p : view.points) xs.push_back(p.x());
-  std::nth_element(xs.begin(), xs.begin() + xs.size() * 45 / 100, xs.end());
-  const float cut = xs[xs.size() * 45 / 100];
-  ScanCloud a, b;
-  for (const auto& p : view.points) (p.x() < cut ? a : b).append(p, 1.f);
+  const SplitView v = splitHousingView(45);
+  const Eigen::Isometry3d& truth = v.truth;
+  const ScanCloud &view = v.whole, &a = v.below, &b = v.above;
   ModelMatcher whole(library(), config());
   const auto one = whole.locate({view}, {"housing"});
   ASSERT_EQ(one.size(), 1u);
@@ -412,21 +425,10 @@ TEST(ModelMatching, APartSplitBetweenTwoClustersIsFoundOnceWhole) {
 // a fragment: never searched, but surface the scan measured, so the part's fitness counts it.
 // Fragments that are not finite or lie far from every cluster are left out.
 TEST(ModelMatching, FragmentsCountInTheFitness) {
-  const Eigen::Isometry3d truth = onTable(0.47, -0.02, 0.7);
-  const ScanCloud view = singleViewCloud(library()->model("housing").mesh, truth, kEye, 0.001, 2e-5, 61);
-  std::vector<float> xs;
-  for (const auto& p : view.points) xs.push_back(p.x());
-  std::nth_element(xs.begin(), xs.begin() + xs.size() * 80 / 100, xs.end());
-  const float cut = xs[xs.size() * 80 / 100];
-  ScanCloud cluster;
-  std::vector<Eigen::Vector3f> fragments;
-  for (const auto& p : view.points) {
-    if (p.x() < cut) {
-      cluster.append(p, 1.f);
-    } else {
-      fragments.push_back(p);
-    }
-  }
+  const SplitView v = splitHousingView(80);
+  const Eigen::Isometry3d& truth = v.truth;
+  const ScanCloud &view = v.whole, &cluster = v.below;
+  const std::vector<Eigen::Vector3f>& fragments = v.above.points;
   ModelMatcher m(library(), config());
   const auto one = m.locate({view}, {"housing"});
   const auto alone = m.locate({cluster}, {"housing"});
