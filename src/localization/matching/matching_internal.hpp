@@ -151,6 +151,7 @@ struct ModelMatcher::ModelIndex {
   std::vector<Eigen::Vector3f> extremes;  // mesh vertices (cloud models: coarse points), for the support test
   std::vector<RestPose> rests;            // how it can lie on a table (rest hypotheses; none for a sphere)
   std::vector<Eigen::Vector2f> rest_top;  // per rest: the in-plane centroid of its upward faces (rest frame)
+  std::vector<std::vector<Eigen::Vector2f>> rest_top_hull;  // ... and their outline (convex hull, rest frame)
 };
 
 namespace matching_detail {
@@ -177,6 +178,12 @@ struct ScenePlane {
   Vec3 n = Vec3::UnitZ(), c = Vec3::Zero(), axis = Vec3::UnitX();  // normal towards the viewpoint, centroid, major axis
   float area = 0;  // m², from the inliers' voxel count
 };
+
+/// Points less than this far inside the sheet's fan (rad) lie at its edge: the calibrated laser
+/// frame puts the fan's apex and axis within about a degree of the projector's, and the line
+/// extraction loses the last millimetres of a line. The unseen test counts only points farther
+/// in; the rest hypotheses take a cluster ending there as cut by the fan.
+constexpr float kFanEdgeMargin = 0.035f;
 
 /// One cluster prepared once for every model: coarse points with normals and FPFH, the points
 /// ICP uses, and a k-d tree over all its points for the fitness test.

@@ -1,9 +1,12 @@
 // Coarse stage "ppf": the model's point pair feature table (Drost et al. 2010), voting over
 // the scene's point pairs, and the best-voted poses scored on the distance field.
 #include <algorithm>
+#include <array>
+#include <limits>
 #include <numeric>
 #include <random>
 
+#include "cellsight/common/polygon.hpp"
 #include "matching_internal.hpp"
 
 namespace cellsight::matching_detail {
@@ -13,6 +16,10 @@ namespace {
 constexpr size_t kPlanarIcpPoints = 200;
 /// Iterations of the short ICP that brings a rest hypothesis in before it is scored.
 constexpr int kRestIcpIterations = 10;
+/// A cluster narrower than this share of a rest's upward faces along an axis is a partial view of them.
+constexpr float kPartialView = 0.7f;
+/// How far beyond a cluster's end the sheet is asked whether it reached (m).
+constexpr float kBeyondEnd = 0.003f;
 
 /// atan2 to within 2e-6 rad of std::atan2 (measured over 300 000 angles; a minimax polynomial on
 /// [0, 1] and octant folding): PPF angles are binned in 12° steps, so libm's exactness only
@@ -227,6 +234,7 @@ std::vector<Hypothesis> planarHypotheses(const SceneData& s, const ModelMatcher:
 void addRests(ModelMatcher::ModelIndex& m) {
   m.rests.clear();
   m.rest_top.clear();
+  m.rest_top_hull.clear();
   // a sphere rests every way (its centre is found directly)
   if (m.info.symmetry.type == Symmetry::Type::kSpherical || !m.fine) return;
   std::vector<Eigen::Vector3d> v;
@@ -237,13 +245,16 @@ void addRests(ModelMatcher::ModelIndex& m) {
     // what a camera above the table sees of it: the faces turned up
     const Eigen::Matrix3f R = r.R.cast<float>();
     Eigen::Vector2f c = Eigen::Vector2f::Zero();
-    int n = 0;
+    std::vector<Eigen::Vector2d> top;
     for (size_t i = 0; i < m.fine->size(); ++i) {
       if ((R * m.fine->normals[i]).z() < 0.5f) continue;
-      c += (R * m.fine->points[i]).head<2>();
-      ++n;
+      top.push_back((R * m.fine->points[i]).head<2>().cast<double>());
+      c += top.back().cast<float>();
     }
-    m.rest_top.push_back(n > 0 ? Eigen::Vector2f(c / static_cast<float>(n)) : Eigen::Vector2f::Zero());
+    m.rest_top.push_back(!top.empty() ? Eigen::Vector2f(c / static_cast<float>(top.size())) : Eigen::Vector2f::Zero());
+    std::vector<Eigen::Vector2f> hull;
+    for (const auto& v : convexHull2d(std::move(top))) hull.push_back(v.cast<float>());
+    m.rest_top_hull.push_back(std::move(hull));
   }
 }
 
@@ -251,7 +262,11 @@ namespace {
 
 /// Poses of the model lying in each of its stable rests on the support (normal: up), turned about
 /// the normal in rest_yaw_step steps, the centroid of its upward faces on the cluster's, each brought
-/// in by a short ICP.
+/// in by a short ICP. Where the cluster ends along one of its principal axes at the edge of what
+/// the sheet reached (the fan's edge, the sweep's end: a tall part's top near the workspace's
+/// end) and spans less than kPartialView of those faces' width along it, the faces are also laid
+/// with their other end on the cluster's other end: centred, a partly lit face is centimetres
+/// off, and a short ICP on a flat face does not slide it back.
 std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                                        const Eigen::Vector4f& support) {
   std::vector<Hypothesis> out;
@@ -272,21 +287,74 @@ std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::M
   Q.col(0) = (std::abs(n.x()) < 0.9f ? Vec3::UnitX() : Vec3::UnitY()).cross(n).normalized();
   Q.col(1) = n.cross(Q.col(0));
   const Vec3 origin = centre - (n.dot(centre) + support.w() / support.head<3>().norm()) * n;
+  // the cluster in the table's frame: its principal axes and how far it reaches each way along them
+  std::vector<Eigen::Vector2f> flat;
+  Eigen::Matrix2f cov = Eigen::Matrix2f::Zero();
+  for (const auto& p : s.coarse.points) {
+    if (!p.allFinite()) continue;
+    flat.push_back((Q.transpose() * (p - origin)).head<2>());
+    cov += flat.back() * flat.back().transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2f> es(cov);
+  std::array<Eigen::Vector2f, 2> axes{es.eigenvectors().col(0), es.eigenvectors().col(1)};
+  auto reach = [](const std::vector<Eigen::Vector2f>& pts, const Eigen::Vector2f& u) {
+    float hi = -std::numeric_limits<float>::infinity();
+    for (const auto& p : pts) hi = std::max(hi, u.dot(p));
+    return hi;
+  };
+  std::array<float, 2> c_hi{}, c_lo{};
+  float height = 0;
+  for (const auto& p : s.coarse.points)
+    if (p.allFinite()) height += n.dot(p - origin) / static_cast<float>(k);
+  // whether the sheet reached a little beyond the cluster's end at u·p = end (table frame)
+  auto litBeyond = [&](const Eigen::Vector2f& u, float end) {
+    const Eigen::Vector2f q = (end + kBeyondEnd) * u;
+    Vec3 emitter;
+    float margin = 0;
+    return s.light->emitterFor(origin + Q * Vec3(q.x(), q.y(), height), &emitter, &margin) && margin >= kFanEdgeMargin;
+  };
+  std::array<bool, 2> cut_hi{}, cut_lo{};
+  for (size_t a = 0; a < 2; ++a) {
+    c_hi[a] = reach(flat, axes[a]);
+    c_lo[a] = -reach(flat, -axes[a]);
+    if (s.light && !s.light->empty()) {
+      cut_hi[a] = !litBeyond(axes[a], c_hi[a]);
+      cut_lo[a] = !litBeyond(-axes[a], -c_lo[a]);
+    }
+  }
   const int steps = std::max(1, static_cast<int>(std::lround(2 * M_PI / cfg.rest_yaw_step)));
   MatchingConfig short_icp = cfg;  // a turn half a step off comes in within a few iterations
   short_icp.icp_iterations = std::min(cfg.icp_iterations, kRestIcpIterations);
   for (size_t r = 0; r < m.rests.size(); ++r) {
     const Eigen::Matrix3f Rr = m.rests[r].R.cast<float>();
-    for (int i = 0; i < steps; ++i) {
+    // a part turned about its own axis of revolution, standing upright, is the same pose: one
+    // turn (else the quota fills with copies of one place)
+    const bool revolves = m.info.symmetry.type == Symmetry::Type::kAxial &&
+                          std::abs((Rr * m.info.symmetry.axis.cast<float>().normalized()).z()) > 0.999f;
+    for (int i = 0; i < (revolves ? 1 : steps); ++i) {
       const Eigen::Matrix3f Rz = Eigen::AngleAxisf(static_cast<float>(2 * M_PI * i / steps), Vec3::UnitZ()).toRotationMatrix();
-      Hypothesis h;
-      h.T.linear() = Q * Rz * Rr;
-      const Eigen::Vector2f top = Rz.topLeftCorner<2, 2>() * m.rest_top[r];
-      h.T.translation() = origin + Q * Vec3(-top.x(), -top.y(), static_cast<float>(m.rests[r].height));
-      const Refined f = icp(s, m, h.T, short_icp, kPlanarIcpPoints, false);
-      if (!f.T.matrix().allFinite()) continue;
-      h.T = f.T;
-      out.push_back(h);
+      const Eigen::Matrix2f Rz2 = Rz.topLeftCorner<2, 2>();
+      const Eigen::Vector2f top = Rz2 * m.rest_top[r];
+      // the upward faces' outline as placed (top centroid on the cluster's centre)
+      std::vector<Eigen::Vector2f> outline;
+      if (r < m.rest_top_hull.size())
+        for (const auto& v : m.rest_top_hull[r]) outline.push_back(Rz2 * v - top);
+      std::vector<Eigen::Vector2f> shifts{Eigen::Vector2f::Zero()};
+      for (size_t a = 0; a < 2 && !outline.empty(); ++a) {
+        const float m_hi = reach(outline, axes[a]), m_lo = -reach(outline, -axes[a]);
+        if (cut_hi[a] == cut_lo[a] || c_hi[a] - c_lo[a] >= kPartialView * (m_hi - m_lo)) continue;
+        // the end the sheet did reach past is the part's own
+        shifts.push_back(cut_hi[a] ? (c_lo[a] - m_lo) * axes[a] : (c_hi[a] - m_hi) * axes[a]);
+      }
+      for (const Eigen::Vector2f& d : shifts) {
+        Hypothesis h;
+        h.T.linear() = Q * Rz * Rr;
+        h.T.translation() = origin + Q * Vec3(d.x() - top.x(), d.y() - top.y(), static_cast<float>(m.rests[r].height));
+        const Refined f = icp(s, m, h.T, short_icp, kPlanarIcpPoints, false);
+        if (!f.T.matrix().allFinite()) continue;
+        h.T = f.T;
+        out.push_back(h);
+      }
     }
   }
   return out;

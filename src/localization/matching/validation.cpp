@@ -80,9 +80,6 @@ bool SupportSeen::seenBehind(const Vec3& eye, const Vec3& p, float min_height) c
 /// How far along the camera's ray and the beam the unseen test looks for what hid a point (m):
 /// beyond the tallest part a cell holds.
 constexpr float kUnseenReach = 0.25f;
-/// The unseen test counts only points this far inside the fan (rad): the calibrated laser frame
-/// puts the fan's apex and axis within about a degree of the projector's.
-constexpr float kUnseenFanMargin = 0.035f;
 /// Model points whose normals agree this well (cos) lie on one face for the unseen test's rim.
 constexpr float kSameFace = 0.7f;
 
@@ -168,7 +165,7 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     // measured well had it been there: it faces camera and emitter squarely, well inside the
     // fan, clear of the support's band and of every scan point, and nothing the scan saw is on
     // the ray or the beam
-    if (!hit && test_unseen && fan_margin >= kUnseenFanMargin && -mn[i].dot((mp[i] - eye).normalized()) >= cos_unseen &&
+    if (!hit && test_unseen && fan_margin >= kFanEdgeMargin && -mn[i].dot((mp[i] - eye).normalized()) >= cos_unseen &&
         -mn[i].dot((mp[i] - Ti * emitter).normalized()) >= cos_unseen &&
         !(has_support && s.support_seen->n.dot(p) + s.support_seen->d <= r_unseen) && !scan->anyWithin(p, r_unseen) &&
         clearPath(p, cfg.viewpoint) && clearPath(p, emitter))
