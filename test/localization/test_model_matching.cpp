@@ -203,6 +203,14 @@ std::vector<Eigen::Vector3f> seenTable(const TriangleMesh& mesh, const Eigen::Is
 namespace {
 const std::string kData = std::string(CELLSIGHT_SOURCE_DIR) + "/test/localization/data/";
 
+/// A true pose as the scene files give it (t; q as w, x, y, z).
+Eigen::Isometry3d truePose(const Eigen::Vector3d& t, const Eigen::Quaterniond& q) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = t;
+  T.linear() = q.normalized().toRotationMatrix();
+  return T;
+}
+
 /// A scan's light sweep as `cellsight_evaluate_localization cells --dump-clusters` writes it.
 LightSweep loadSweep(const std::string& path) {
   LightSweep sweep;
@@ -241,9 +249,7 @@ Recorded locateRecorded(const std::string& file, size_t points, const std::vecto
   ModelMatcher m(library(), c);
   const ScanCloud view = loadCloud(kData + file);
   EXPECT_EQ(view.size(), points);
-  Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
-  truth.translation() = t;
-  truth.linear() = q.normalized().toRotationMatrix();
+  const Eigen::Isometry3d truth = truePose(t, q);
   const Eigen::Vector4f table(0, 0, 1, 0);
   Recorded r;
   r.found = m.locate({view}, models, nullptr, nullptr, &table);
@@ -304,10 +310,9 @@ TEST(ModelMatching, APoseIsCentredInItsSlackBeforeItsUnseenShareIsTaken) {
   ASSERT_EQ(view.size(), 244u);
   const LightSweep sweep = loadSweep(kData + "sweep_3014.txt");
   ASSERT_EQ(sweep.size(), 150u);
-  Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
-  truth.translation() = Eigen::Vector3d(0.53838319225177966, -0.062067200442959179, 0.019999999552965164);
-  truth.linear() = Eigen::Quaterniond(0.53692517908050297, -0.53692517908050263, 0.46012101893889812,
-                                      -0.46012101893889823).normalized().toRotationMatrix();
+  const Eigen::Isometry3d truth =
+      truePose({0.53838319225177966, -0.062067200442959179, 0.019999999552965164},
+               {0.53692517908050297, -0.53692517908050263, 0.46012101893889812, -0.46012101893889823});
   MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
   c.viewpoint = kEye;
   const Eigen::Vector4f table(0, 0, 1, 0);
@@ -341,10 +346,9 @@ TEST(ModelMatching, APartlyLitFlangeIsLaidByItsEnd) {
   ASSERT_EQ(view.size(), 355u);
   const LightSweep sweep = loadSweep(kData + "sweep_3017.txt");
   ASSERT_EQ(sweep.size(), 150u);
-  Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
-  truth.translation() = Eigen::Vector3d(0.38309092001588868, 0.086631768258378677, 0.0625);
-  truth.linear() = Eigen::Quaterniond(1.3262429713065958e-17, 0.97626223053469918, 0.21659191404901035,
-                                      -5.9778820787638735e-17).normalized().toRotationMatrix();
+  const Eigen::Isometry3d truth = truePose({0.38309092001588868, 0.086631768258378677, 0.0625},
+                                           {1.3262429713065958e-17, 0.97626223053469918, 0.21659191404901035,
+                                            -5.9778820787638735e-17});
   MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
   c.viewpoint = kEye;
   const Eigen::Vector4f table(0, 0, 1, 0);
