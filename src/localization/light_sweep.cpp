@@ -2,9 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 
+#include "cellsight/common/errors.hpp"
+#include "cellsight/common/file_io.hpp"
 #include "cellsight/common/plane.hpp"
 
 namespace cellsight {
@@ -86,6 +90,51 @@ bool LightSweep::emitterFor(const Eigen::Vector3f& p, Eigen::Vector3f* emitter, 
   const float t = s_lo / (s_lo - s_hi);
   *emitter = emitters_[lo] + t * (emitters_[hi] - emitters_[lo]);
   return inFan(t < 0.5f ? lo : hi, *emitter, p, fan_margin);
+}
+
+void saveSweep(const std::string& path, const LightSweep& sweep) {
+  std::ostringstream out;
+  out.precision(9);
+  out << "# fan_half_angle " << sweep.fanHalfAngle() << "\n# emitter (3) normal (3) offset axis (3), metres\n";
+  for (size_t k = 0; k < sweep.size(); ++k) {
+    const auto &e = sweep.emitter(k), &n = sweep.normal(k), &a = sweep.axis(k);
+    out << e.x() << ' ' << e.y() << ' ' << e.z() << ' ' << n.x() << ' ' << n.y() << ' ' << n.z() << ' ' << sweep.offset(k)
+        << ' ' << a.x() << ' ' << a.y() << ' ' << a.z() << '\n';
+  }
+  writeFileAtomic(path, out.str());
+}
+
+LightSweep loadSweep(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ConfigError(path + ": cannot open the sweep file (missing or unreadable)");
+  LightSweep sweep;
+  std::string line;
+  double half = 0;
+  for (int no = 1; std::getline(in, line); ++no) {
+    std::istringstream l(line);
+    if (line.rfind("# fan_half_angle ", 0) == 0) {
+      l.ignore(17);
+      if (!(l >> half)) throw ConfigError(path + ":" + std::to_string(no) + ": fan_half_angle is not a number");
+      continue;
+    }
+    if (line.find_first_not_of(" \t\r") == std::string::npos || line[0] == '#') continue;
+    float v[10];
+    for (float& x : v) l >> x;
+    std::string rest;
+    if (!l || (l >> rest))
+      throw ConfigError(path + ":" + std::to_string(no) + ": a frame is ten numbers (emitter, normal, offset, axis)");
+    try {
+      sweep.add({v[0], v[1], v[2]}, {v[3], v[4], v[5]}, v[6], {v[7], v[8], v[9]});
+    } catch (const std::invalid_argument& e) {
+      throw ConfigError(path + ":" + std::to_string(no) + ": " + e.what());
+    }
+  }
+  try {
+    sweep.setFanHalfAngle(half);
+  } catch (const std::invalid_argument& e) {
+    throw ConfigError(path + ": fan_half_angle: " + e.what());
+  }
+  return sweep;
 }
 
 }  // namespace cellsight

@@ -391,17 +391,8 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
     ScanCloud fragments;  // unclustered points: evidence for the fitness and unseen tests only
     for (const auto& p : cr.fragments) fragments.append(p, 0.f);
     if (fragments.size() > 0) saveCloud(o.dump_clusters + "/" + scene.name + "_fragments.ply", fragments);
-    if (light) {  // the sweep the illumination and unseen tests read: one frame per line
-      std::ostringstream out;
-      out << "# fan_half_angle " << light->fanHalfAngle() << "\n# emitter (3) normal (3) offset axis (3), metres\n";
-      out.precision(9);
-      for (size_t k = 0; k < light->size(); ++k) {
-        const auto &e = light->emitter(k), &n = light->normal(k), &a = light->axis(k);
-        out << e.x() << ' ' << e.y() << ' ' << e.z() << ' ' << n.x() << ' ' << n.y() << ' ' << n.z() << ' '
-            << light->offset(k) << ' ' << a.x() << ' ' << a.y() << ' ' << a.z() << '\n';
-      }
-      writeFileAtomic(o.dump_clusters + "/" + scene.name + "_sweep.txt", out.str());
-    }
+    // the sweep the illumination and unseen tests read
+    if (light) saveSweep(o.dump_clusters + "/" + scene.name + "_sweep.txt", *light);
   }
   const Eigen::Vector3f eye = scene.scanner_camera.T_base_camera.translation().cast<float>();
   const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),

@@ -1,9 +1,12 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 
 #include "cellsight/common/plane.hpp"
+#include "cellsight/common/errors.hpp"
 #include "cellsight/localization/light_sweep.hpp"
+#include "test_helpers.hpp"
 
 using namespace cellsight;
 
@@ -119,4 +122,31 @@ TEST(LightSweep, BadFramesAreRefusedAndShortSweepsLightNothing) {
   EXPECT_THROW(s.add(Eigen::Vector3f::Constant(NAN), Eigen::Vector3f::UnitX(), 0.f), std::invalid_argument);
   EXPECT_THROW(s.add(Eigen::Vector3f::Zero(), Eigen::Vector3f::UnitX(), INFINITY), std::invalid_argument);
   EXPECT_EQ(s.size(), 1u);
+}
+
+// The sweep's text (--dump-clusters) reads back frame for frame; a broken file is refused with
+// its name and line.
+TEST(LightSweep, SavedAndLoadedAsText) {
+  LightSweep s = translatingSheet();
+  s.setFanHalfAngle(0.525);
+  const std::string dir = cellsight_test::tempDir();
+  saveSweep(dir + "/sweep.txt", s);
+  const LightSweep r = loadSweep(dir + "/sweep.txt");
+  ASSERT_EQ(r.size(), s.size());
+  EXPECT_DOUBLE_EQ(r.fanHalfAngle(), 0.525);
+  for (size_t k = 0; k < s.size(); ++k) {
+    EXPECT_TRUE(r.emitter(k).isApprox(s.emitter(k), 1e-6f)) << k;
+    EXPECT_TRUE(r.normal(k).isApprox(s.normal(k), 1e-6f)) << k;
+    EXPECT_NEAR(r.offset(k), s.offset(k), 1e-7f) << k;
+    EXPECT_EQ(r.axis(k), s.axis(k)) << k;
+  }
+  auto bad = [&](const std::string& text) {
+    std::ofstream(dir + "/bad.txt") << text;
+    return cellsight_test::errorOf([&] { loadSweep(dir + "/bad.txt"); });
+  };
+  EXPECT_NE(bad("0 0 0.5 1 0 0 0 0 0\n").find("bad.txt:1: a frame is ten numbers"), std::string::npos);
+  EXPECT_NE(bad("# fan_half_angle 0.5\n0 0 0.5 2 0 0 0 0 0 0\n").find("bad.txt:2: LightSweep"), std::string::npos);
+  EXPECT_NE(bad("# fan_half_angle x\n").find("not a number"), std::string::npos);
+  EXPECT_NE(bad("0 0 0.5 1 0 0 0 0 0 0 7\n").find("ten numbers"), std::string::npos);
+  EXPECT_NE(cellsight_test::errorOf([&] { loadSweep(dir + "/none.txt"); }).find("cannot open"), std::string::npos);
 }

@@ -5,7 +5,6 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
-#include <sstream>
 
 #include "cellsight/common/errors.hpp"
 #include "cellsight/common/raycaster.hpp"
@@ -209,28 +208,6 @@ Eigen::Isometry3d truePose(const Eigen::Vector3d& t, const Eigen::Quaterniond& q
   T.translation() = t;
   T.linear() = q.normalized().toRotationMatrix();
   return T;
-}
-
-/// A scan's light sweep as `cellsight_evaluate_localization cells --dump-clusters` writes it.
-LightSweep loadSweep(const std::string& path) {
-  LightSweep sweep;
-  std::ifstream in(path);
-  std::string line;
-  double half = 0;
-  while (std::getline(in, line)) {
-    std::istringstream l(line);
-    if (line.rfind("# fan_half_angle", 0) == 0) {
-      l.ignore(16);
-      l >> half;
-    }
-    if (line.empty() || line[0] == '#') continue;
-    float v[10];
-    for (float& x : v) l >> x;
-    if (!l) throw std::runtime_error(path + ": unreadable frame: " + line);
-    sweep.add({v[0], v[1], v[2]}, {v[3], v[4], v[5]}, v[6], {v[7], v[8], v[9]});
-  }
-  sweep.setFanHalfAngle(half);
-  return sweep;
 }
 
 /// A cluster the simulated scanner recorded (test/localization/data/<file>) located among

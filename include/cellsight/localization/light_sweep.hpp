@@ -4,6 +4,7 @@
 // (docs/localization.md, "Illumination").
 #pragma once
 #include <Eigen/Geometry>
+#include <string>
 #include <vector>
 
 namespace cellsight {
@@ -54,5 +55,13 @@ class LightSweep {
   double fan_half_angle_ = 0;
   float cos_fan_ = -1.f;
 };
+
+/// A sweep as text (`cellsight_evaluate_localization cells --dump-clusters`: `<scene>_sweep.txt`):
+/// a line `# fan_half_angle <rad>`, then one frame per line — emitter (3), sheet normal (3),
+/// offset, fan axis (3), metres; lines starting with `#` are comments. Written atomically.
+void saveSweep(const std::string& path, const LightSweep& sweep);
+/// Reads saveSweep's text; throws ConfigError naming the file and line for a missing file, a
+/// line without ten numbers or a frame add() refuses.
+LightSweep loadSweep(const std::string& path);
 
 }  // namespace cellsight

@@ -287,13 +287,17 @@ std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::M
   Q.col(0) = (std::abs(n.x()) < 0.9f ? Vec3::UnitX() : Vec3::UnitY()).cross(n).normalized();
   Q.col(1) = n.cross(Q.col(0));
   const Vec3 origin = centre - (n.dot(centre) + support.w() / support.head<3>().norm()) * n;
-  // the cluster in the table's frame: its principal axes and how far it reaches each way along them
+  // the cluster in the table's frame: its principal axes, how far it reaches each way along
+  // them, its mean height
   std::vector<Eigen::Vector2f> flat;
   Eigen::Matrix2f cov = Eigen::Matrix2f::Zero();
+  float height = 0;
   for (const auto& p : s.coarse.points) {
     if (!p.allFinite()) continue;
-    flat.push_back((Q.transpose() * (p - origin)).head<2>());
+    const Vec3 local = Q.transpose() * (p - origin);
+    flat.push_back(local.head<2>());
     cov += flat.back() * flat.back().transpose();
+    height += local.z() / static_cast<float>(k);
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2f> es(cov);
   std::array<Eigen::Vector2f, 2> axes{es.eigenvectors().col(0), es.eigenvectors().col(1)};
@@ -303,9 +307,6 @@ std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::M
     return hi;
   };
   std::array<float, 2> c_hi{}, c_lo{};
-  float height = 0;
-  for (const auto& p : s.coarse.points)
-    if (p.allFinite()) height += n.dot(p - origin) / static_cast<float>(k);
   // whether the sheet reached a little beyond the cluster's end at u·p = end (table frame)
   auto litBeyond = [&](const Eigen::Vector2f& u, float end) {
     const Eigen::Vector2f q = (end + kBeyondEnd) * u;
