@@ -3,15 +3,74 @@
 // waits until the triangulation node has processed every frame, finishes the scan into
 // ~output_file and exits (0 on success).
 #include <ros/master.h>
+#include <ros/network.h>
 #include <ros/ros.h>
+#include <xmlrpcpp/XmlRpcClient.h>
+#include <xmlrpcpp/XmlRpcException.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <std_srvs/SetBool.h>
 
 #include <algorithm>
+#include <map>
+#include <set>
+#include <string>
 
 #include "cellsight/FinishScan.h"
 #include "cellsight_ros/params.hpp"
+
+namespace {
+
+/// The subscribers of `publisher`'s topics that it has no connection to yet, as "topic: node"
+/// (empty: every node the master lists as a subscriber of each topic it publishes is connected);
+/// *links: how many (topic, subscriber) pairs there are.
+/// A subscriber registers with the master first and connects to the publisher afterwards, on a
+/// busy machine a second or more later: a message played in between is lost to it. Throws
+/// std::runtime_error when the master or the publisher cannot be asked.
+std::vector<std::string> unconnectedSubscribers(const std::string& publisher, size_t* links) {
+  XmlRpc::XmlRpcValue args, result, state, uri;
+  args[0] = ros::this_node::getName();
+  if (!ros::master::execute("getSystemState", args, result, state, false))
+    throw std::runtime_error("the master's getSystemState failed");
+  // [publishers, subscribers, services], each a list of [name, [nodes]]
+  std::set<std::string> published;
+  std::map<std::string, std::set<std::string>> subscribers;
+  for (int i = 0; i < state[0].size(); ++i)
+    for (int j = 0; j < state[0][i][1].size(); ++j)
+      if (static_cast<std::string>(state[0][i][1][j]) == publisher) published.insert(state[0][i][0]);
+  for (int i = 0; i < state[1].size(); ++i)
+    for (int j = 0; j < state[1][i][1].size(); ++j) subscribers[state[1][i][0]].insert(state[1][i][1][j]);
+  args[1] = publisher;
+  if (!ros::master::execute("lookupNode", args, result, uri, false))
+    throw std::runtime_error("the master does not know " + publisher);
+  std::string host;
+  uint32_t port = 0;
+  if (!ros::network::splitURI(uri, host, port)) throw std::runtime_error(publisher + " has a bad URI: " + std::string(uri));
+  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
+  XmlRpc::XmlRpcValue request, bus;
+  request[0] = ros::this_node::getName();
+  if (!client.execute("getBusInfo", request, bus) || bus.getType() != XmlRpc::XmlRpcValue::TypeArray || bus.size() < 3)
+    throw std::runtime_error(publisher + " did not answer getBusInfo");
+  // each connection: [id, the other node, direction ("o": out), transport, topic, connected, ...]
+  std::map<std::string, std::set<std::string>> connected;
+  for (int i = 0; i < bus[2].size(); ++i) {
+    XmlRpc::XmlRpcValue& c = bus[2][i];
+    if (c.size() < 5 || static_cast<std::string>(c[2]) != "o") continue;
+    if (c.size() > 5 && c[5].getType() == XmlRpc::XmlRpcValue::TypeBoolean && !static_cast<bool>(c[5])) continue;
+    connected[c[4]].insert(c[1]);
+  }
+  std::vector<std::string> missing;
+  *links = 0;
+  for (const auto& topic : published)
+    for (const auto& node : subscribers[topic]) {
+      if (node == publisher) continue;
+      ++*links;
+      if (!connected[topic].count(node)) missing.push_back(topic + ": " + node);
+    }
+  return missing;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "replay_finisher");
@@ -48,14 +107,33 @@ int main(int argc, char** argv) {
           throw std::runtime_error("nobody publishes " + plane_topic + " after 60 s: is laser_plane_tracker running?");
         ros::WallDuration(0.1).sleep();
       }
-      ros::WallDuration(1.0).sleep();  // subscribers connect to the player after registering
+      // ... and once every subscriber of the player's topics has connected to it
+      const ros::WallTime t_connect = ros::WallTime::now();
+      size_t links = 0;
+      for (;;) {
+        std::vector<std::string> missing;
+        try {
+          missing = unconnectedSubscribers(ros::names::resolve(player), &links);
+        } catch (const std::exception& e) {
+          missing = {e.what()};
+        } catch (const XmlRpc::XmlRpcException& e) {
+          missing = {"a malformed answer (" + e.getMessage() + ")"};
+        }
+        if (missing.empty()) break;
+        if (ros::WallTime::now() > give_up)
+          throw std::runtime_error("after 60 s the player " + player + " is still not connected to " + missing.front() +
+                                   " (" + std::to_string(missing.size()) + " in all): is that node stuck?");
+        ros::WallDuration(0.1).sleep();
+      }
       ros::ServiceClient pause = nh.serviceClient<std_srvs::SetBool>(player + "/pause_playback");
       if (!pause.waitForExistence(ros::Duration(60.0)))
         throw std::runtime_error(pause.getService() + " did not appear: is the bag player (rosbag play --pause) running?");
       std_srvs::SetBool go;
       go.request.data = false;
       if (!pause.call(go)) throw std::runtime_error("call to " + pause.getService() + " failed");
-      ROS_INFO("replay_finisher: the processing nodes are subscribed; playback started");
+      ROS_INFO("replay_finisher: the processing nodes are subscribed and the player is connected to all %zu "
+               "subscribers of its topics (waited %.2f s for them); playback started",
+               links, (ros::WallTime::now() - t_connect).toSec());
     }
     cellsight::FinishScan srv;
     srv.request.output_file = output;
