@@ -453,6 +453,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   sj["points"] = cloud.size();
   sj["clusters"] = clusters.size();
   sj["locate_seconds"] = st.seconds;
+  sj["split_parts_polished"] = st.split_parts_polished;
   return sj;
 }
 

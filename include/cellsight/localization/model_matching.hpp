@@ -137,6 +137,10 @@ struct MatchingConfig {
   /// Fitness counts scan points of every cluster of the locate() call and its fragments (false:
   /// only the matched cluster's): a part that clustering split is not short of its own points.
   bool fitness_whole_scan = true;
+  /// A part found in one cluster whose model, at its pose, lies near points of other clusters or
+  /// fragments (clustering split it) is polished again on the scan points near its model, with
+  /// refine_radius (docs/localization.md, "Split parts"); false: polished on its cluster only.
+  bool polish_split_parts = true;
   /// Parts rest on a support (the table the clustering removed): a pose that puts the model more
   /// than this below the support plane is not physical and is discarded before validation
   /// (a thin flat part seen from above fits upside down as well). Used when locate() is given
@@ -215,6 +219,10 @@ struct MatchStats {
   /// of which the learned descriptor (scene clusters; the models' at preparation are not counted)
   double descriptor_seconds = 0;
   size_t pairs = 0, pairs_skipped_by_size = 0;
+  /// parts polished again on points of other clusters (polish_split_parts), and how far that
+  /// moved them in all (m, a model point's move)
+  size_t split_parts_polished = 0;
+  double split_polish_moved = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
 };

@@ -16,6 +16,12 @@ namespace {
 
 /// Screened candidates polished per (cluster, model) pair.
 constexpr size_t kPolished = 2;
+/// polishSplitParts: a part needs this many points of other clusters or fragments near its model
+/// to be polished again on them; at most this many rounds; a round moving a model point less
+/// than this ends it (m)
+constexpr size_t kSplitMinPoints = 30;
+constexpr int kSplitRounds = 3;
+constexpr double kSplitSettled = 0.0005;
 
 /// Fragments (unclustered scan points) farther than this from every cluster's box are not
 /// evidence for any pose (m): beyond the largest part a cell holds.
@@ -96,6 +102,18 @@ bool sphereCentre(const SceneData& s, const ModelMatcher::ModelIndex& m, Eigen::
   *T = Eigen::Isometry3f::Identity();
   T->translation() = centre - c;
   return true;
+}
+
+/// A scan point's distance to a model (Ti: the inverse of its pose); infinite beyond `radius`.
+float modelDistance(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& Ti, const Vec3& p, float radius) {
+  const Vec3 q = Ti * p;
+  if (m.has_mesh) {
+    const ClosestPoint c = meshClosest(m, q, radius);
+    return c.found ? (q - c.point).norm() : std::numeric_limits<float>::infinity();
+  }
+  const int j = m.field.lookup(q);
+  const float d = j < 0 ? std::numeric_limits<float>::infinity() : (q - m.fine->points[j]).norm();
+  return d <= radius ? d : std::numeric_limits<float>::infinity();
 }
 
 PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
@@ -391,6 +409,90 @@ void ModelMatcher::prepare(const std::vector<std::string>& models_in) const {
 
 Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return index(model)->centroid; }
 
+namespace {
+
+/// A part that clustering split (a blade lying flat: its root block's top apart from the blade's)
+/// was polished on the piece it was found in, and a flat piece leaves it free to slide: along a
+/// tapered blade the scanner's edge loss lets it slide millimetres (tuning cell 3044: 5.4 mm).
+/// Each found part with at least kSplitMinPoints points of other clusters or fragments within
+/// refine_radius of its model is polished again, on every scan point within refine_radius of its
+/// model that lies nearer it than any other found part's, up to kSplitRounds times while it moves
+/// by more than kSplitSettled; a pose is kept when it is accepted and explains more of the
+/// model's visible surface (fitness: the whole scan's). Coverage stays the matched cluster's.
+void polishSplitParts(std::vector<PartDetection>& parts, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                      const std::vector<std::string>& models, const std::vector<Vec3>& scan,
+                      const std::vector<int>& scan_cluster, const PointGrid& whole, const SupportSeen& seen,
+                      const LightSweep* light, const Eigen::Vector4f* support_plane, const MatchingConfig& cfg,
+                      MatchStats& st) {
+  const float radius = static_cast<float>(cfg.refine_radius);
+  std::vector<const ModelMatcher::ModelIndex*> mi(parts.size());
+  std::vector<Eigen::Isometry3f> Tinv(parts.size());
+  std::vector<Vec3> centre(parts.size());
+  std::vector<float> reach(parts.size());
+  for (size_t i = 0; i < parts.size(); ++i) {
+    mi[i] = idx[std::find(models.begin(), models.end(), parts[i].model) - models.begin()].get();
+    Tinv[i] = parts[i].pose.cast<float>().inverse();
+    centre[i] = parts[i].pose.cast<float>() * mi[i]->centroid.cast<float>();
+    reach[i] = mi[i]->diameter + radius;  // the centroid lies inside: no point of the part is farther
+  }
+  std::vector<double> moves(parts.size(), -1.0);
+  parallelFor(parts.size(), cfg.threads, [&](size_t i) {
+    const ModelMatcher::ModelIndex& m = *mi[i];
+    PartDetection cur = parts[i];
+    Eigen::Isometry3f T = cur.pose.cast<float>();
+    double moved = 0;
+    int rounds = 0;  // polished and kept
+    for (int round = 0; round < kSplitRounds; ++round) {
+      // the points within the radius of its model, nearer it than any other part's
+      const Eigen::Isometry3f Ti = T.inverse();
+      const Vec3 c = T * m.centroid.cast<float>();
+      std::vector<Vec3> pts;
+      size_t foreign = 0;
+      for (size_t k = 0; k < scan.size(); ++k) {
+        const Vec3& p = scan[k];
+        if ((p - c).norm() > reach[i]) continue;
+        const float d = modelDistance(m, Ti, p, radius);
+        if (!std::isfinite(d)) continue;
+        bool other = false;
+        for (size_t j = 0; j < parts.size() && !other; ++j)
+          other = j != i && (p - centre[j]).norm() <= reach[j] && modelDistance(*mi[j], Tinv[j], p, radius) < d;
+        if (other) continue;
+        pts.push_back(p);
+        foreign += scan_cluster[k] != cur.cluster;
+      }
+      if (round == 0 && foreign < kSplitMinPoints) return;
+      std::unique_ptr<SceneData> sd = prepareScene(pts, cfg);
+      sd->whole = &whole;
+      sd->support_seen = &seen;
+      if (light && cfg.check_illumination && !light->empty()) sd->light = light;
+      PartDetection r;
+      const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
+      if (!finishPose(*sd, m, cfg, support_plane, cur, T, all_points, true, &r) || !accepted(r, cfg) || r.fitness <= cur.fitness)
+        break;
+      r.coverage = cur.coverage;
+      r.score = r.fitness * (cfg.min_coverage > 0 ? r.coverage : 1.0);
+      const PoseError e = poseError(m.info, m.centroid, r.pose, cur.pose);
+      const double step = e.translation + e.rotation * 0.5 * m.diameter;
+      moved += step;
+      ++rounds;
+      cur = r;
+      T = r.pose.cast<float>();
+      if (step < kSplitSettled) break;
+    }
+    if (rounds == 0) return;
+    cur.pose = canonicalPose(m.info, m.centroid, cur.pose);
+    parts[i] = cur;
+    moves[i] = moved;
+  });
+  for (double d : moves) {
+    if (d < 0) continue;
+    ++st.split_parts_polished;
+    st.split_polish_moved += d;
+  }
+}
+
+}  // namespace
+
 std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
                                             const std::vector<std::string>& models_in, MatchStats* stats,
                                             const Eigen::Vector3f* viewpoint, const Eigen::Vector4f* support_plane,
@@ -457,12 +559,15 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     for (const auto& p : *fragments)
       if (p.allFinite() && near.contains(p)) pieces.push_back(p);
   }
-  PointGrid whole;
-  if (cfg.fitness_whole_scan && !round.empty() && (round.size() > 1 || !pieces.empty())) {
-    std::vector<Vec3> all = std::move(pieces);
-    for (const auto& w : round) all.insert(all.end(), w.points.begin(), w.points.end());
-    whole = PointGrid(all, static_cast<float>(cfg.fitness_radius));
+  std::vector<Vec3> scan = pieces;                 // every cluster's points and the fragments near them
+  std::vector<int> scan_cluster(pieces.size(), -1);  // ... their cluster (-1: a fragment)
+  for (const auto& w : round) {
+    scan.insert(scan.end(), w.points.begin(), w.points.end());
+    scan_cluster.insert(scan_cluster.end(), w.points.size(), w.cluster);
   }
+  PointGrid whole;
+  if (cfg.fitness_whole_scan && !round.empty() && (round.size() > 1 || !pieces.empty()))
+    whole = PointGrid(scan, static_cast<float>(cfg.fitness_radius));
   for (int instance = 0; instance < std::max(1, cfg.max_instances) && !round.empty(); ++instance) {
     parallelFor(round.size(), cfg.threads, [&](size_t i) {
       const auto t = Clock::now();
@@ -588,6 +693,11 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
   std::vector<PartDetection> kept;
   for (size_t i = 0; i < out.size(); ++i)
     if (!drop[i]) kept.push_back(out[i]);
+  if (cfg.polish_split_parts && whole.size() > 0) {
+    const auto t_split = Clock::now();
+    polishSplitParts(kept, idx, models, scan, scan_cluster, whole, seen, light, support_plane, cfg, st);
+    st.refine_seconds += seconds(t_split);
+  }
   st.seconds = seconds(t0);
   return kept;
 }
@@ -604,17 +714,7 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
   parallelFor(parts.size(), cfg.threads, [&](size_t i) { idx[i] = index(parts[i].model); });
   const float radius = static_cast<float>(cfg.refine_radius);
   // a scan point's distance to part i's model (Ti: the inverse of its pose); infinite beyond the radius
-  auto distanceTo = [&](size_t i, const Eigen::Isometry3f& Ti, const Vec3& p) {
-    const ModelIndex& m = *idx[i];
-    const Vec3 q = Ti * p;
-    if (m.has_mesh) {
-      const ClosestPoint c = meshClosest(m, q, radius);
-      return c.found ? (q - c.point).norm() : std::numeric_limits<float>::infinity();
-    }
-    const int j = m.field.lookup(q);
-    const float d = j < 0 ? std::numeric_limits<float>::infinity() : (q - m.fine->points[j]).norm();
-    return d <= radius ? d : std::numeric_limits<float>::infinity();
-  };
+  auto distanceTo = [&](size_t i, const Eigen::Isometry3f& Ti, const Vec3& p) { return modelDistance(*idx[i], Ti, p, radius); };
   std::vector<Eigen::Isometry3f> Tinv(parts.size());
   std::vector<Vec3> centre(parts.size());
   std::vector<float> reach(parts.size());

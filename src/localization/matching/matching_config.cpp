@@ -115,6 +115,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("refine_max_shift", c.refine_max_shift);
   c.icp_centre_slack = m.getBool("icp_centre_slack", c.icp_centre_slack);
   c.fitness_whole_scan = m.getBool("fitness_whole_scan", c.fitness_whole_scan);
+  c.polish_split_parts = m.getBool("polish_split_parts", c.polish_split_parts);
   positive("icp_slack_range", c.icp_slack_range);
   positive("icp_slack_tolerance", c.icp_slack_tolerance);
   share("icp_slack_eigen_ratio", c.icp_slack_eigen_ratio);
