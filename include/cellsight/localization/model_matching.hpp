@@ -140,6 +140,7 @@ struct MatchingConfig {
   /// A part found in one cluster whose model, at its pose, lies near points of other clusters or
   /// fragments (clustering split it) is polished again on the scan points near its model, with
   /// refine_radius (docs/localization.md, "Split parts"); false: polished on its cluster only.
+  /// Needs fitness_whole_scan (the new pose must explain more of the whole scan).
   bool polish_split_parts = true;
   /// Parts rest on a support (the table the clustering removed): a pose that puts the model more
   /// than this below the support plane is not physical and is discarded before validation

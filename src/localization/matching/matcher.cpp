@@ -116,6 +116,72 @@ float modelDistance(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& 
   return d <= radius ? d : std::numeric_limits<float>::infinity();
 }
 
+/// Found parts at their poses, for handing scan points to them: a point belongs to the part
+/// whose model lies nearest it, within `radius`.
+struct FoundParts {
+  std::vector<const ModelMatcher::ModelIndex*> model;  // per part
+  std::vector<Eigen::Isometry3f> Tinv;
+  std::vector<Vec3> centre;
+  std::vector<float> reach;  // no point of part i lies farther from its centre (its centroid lies inside)
+  float radius = 0;
+  FoundParts(const std::vector<PartDetection>& parts, std::vector<const ModelMatcher::ModelIndex*> models, float r)
+      : model(std::move(models)), Tinv(parts.size()), centre(parts.size()), reach(parts.size()), radius(r) {
+    for (size_t i = 0; i < parts.size(); ++i) {
+      const Eigen::Isometry3f T = parts[i].pose.cast<float>();
+      Tinv[i] = T.inverse();
+      centre[i] = T * model[i]->centroid.cast<float>();
+      reach[i] = model[i]->diameter + radius;
+    }
+  }
+  /// p's distance to part i's model at its pose (infinite beyond the radius)
+  float distance(size_t i, const Vec3& p) const {
+    if ((p - centre[i]).norm() > reach[i]) return std::numeric_limits<float>::infinity();
+    return modelDistance(*model[i], Tinv[i], p, radius);
+  }
+  /// the part p belongs to (-1: none within the radius)
+  int owner(const Vec3& p) const {
+    int best_i = -1;
+    float best = std::numeric_limits<float>::infinity();
+    for (size_t i = 0; i < centre.size(); ++i) {
+      const float d = distance(i, p);
+      if (d < best) {
+        best = d;
+        best_i = static_cast<int>(i);
+      }
+    }
+    return best_i;
+  }
+  /// another part than i lies nearer p than d
+  bool nearerOther(size_t i, const Vec3& p, float d) const {
+    for (size_t j = 0; j < centre.size(); ++j)
+      if (j != i && distance(j, p) < d) return true;
+    return false;
+  }
+};
+
+/// How far a model point moves from pose a to pose b, the part's symmetry taken out: its
+/// centroid's move plus the turn's arc at the part's radius (m).
+double modelMove(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  const PoseError e = poseError(m.info, m.centroid, b, a);
+  return e.translation + e.rotation * 0.5 * m.diameter;
+}
+
+/// `d` polished (and centred in its slack) from T0 on `points` (thinned to max_cluster_points),
+/// its figures taken with the scene's whole-scan grid, support and sweep where given; false when
+/// the ICP diverged or the pose left the support.
+bool polishOn(std::vector<Vec3> points, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+              const Eigen::Vector4f* support_plane, const PartDetection& d, const Eigen::Isometry3f& T0,
+              const PointGrid* whole, const SupportSeen* seen, const LightSweep* light, PartDetection* r) {
+  const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
+  if (points.size() > cap) points = capPoints(points, cfg.icp_spacing, cap);
+  const std::unique_ptr<SceneData> sd = prepareScene(points, cfg);
+  sd->whole = whole;
+  sd->support_seen = seen;
+  if (light && cfg.check_illumination && !light->empty()) sd->light = light;
+  const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
+  return finishPose(*sd, m, cfg, support_plane, d, T0, all_points, true, r);
+}
+
 PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                     const Eigen::Vector4f* support, uint64_t seed) {
   PartDetection d;
@@ -424,59 +490,39 @@ void polishSplitParts(std::vector<PartDetection>& parts, const std::vector<std::
                       const std::vector<int>& scan_cluster, const PointGrid& whole, const SupportSeen& seen,
                       const LightSweep* light, const Eigen::Vector4f* support_plane, const MatchingConfig& cfg,
                       MatchStats& st) {
-  const float radius = static_cast<float>(cfg.refine_radius);
   std::vector<const ModelMatcher::ModelIndex*> mi(parts.size());
-  std::vector<Eigen::Isometry3f> Tinv(parts.size());
-  std::vector<Vec3> centre(parts.size());
-  std::vector<float> reach(parts.size());
-  for (size_t i = 0; i < parts.size(); ++i) {
+  for (size_t i = 0; i < parts.size(); ++i)
     mi[i] = idx[std::find(models.begin(), models.end(), parts[i].model) - models.begin()].get();
-    Tinv[i] = parts[i].pose.cast<float>().inverse();
-    centre[i] = parts[i].pose.cast<float>() * mi[i]->centroid.cast<float>();
-    reach[i] = mi[i]->diameter + radius;  // the centroid lies inside: no point of the part is farther
-  }
+  const FoundParts found(parts, mi, static_cast<float>(cfg.refine_radius));
   std::vector<double> moves(parts.size(), -1.0);
   parallelFor(parts.size(), cfg.threads, [&](size_t i) {
     const ModelMatcher::ModelIndex& m = *mi[i];
     PartDetection cur = parts[i];
-    Eigen::Isometry3f T = cur.pose.cast<float>();
     double moved = 0;
     int rounds = 0;  // polished and kept
     for (int round = 0; round < kSplitRounds; ++round) {
-      // the points within the radius of its model, nearer it than any other part's
-      const Eigen::Isometry3f Ti = T.inverse();
-      const Vec3 c = T * m.centroid.cast<float>();
+      // the points within the radius of its model where it now lies, nearer it than any other
+      // part's (the others where they were found)
+      const FoundParts here({cur}, {&m}, found.radius);
       std::vector<Vec3> pts;
       size_t foreign = 0;
       for (size_t k = 0; k < scan.size(); ++k) {
-        const Vec3& p = scan[k];
-        if ((p - c).norm() > reach[i]) continue;
-        const float d = modelDistance(m, Ti, p, radius);
-        if (!std::isfinite(d)) continue;
-        bool other = false;
-        for (size_t j = 0; j < parts.size() && !other; ++j)
-          other = j != i && (p - centre[j]).norm() <= reach[j] && modelDistance(*mi[j], Tinv[j], p, radius) < d;
-        if (other) continue;
-        pts.push_back(p);
+        const float d = here.distance(0, scan[k]);
+        if (!std::isfinite(d) || found.nearerOther(i, scan[k], d)) continue;
+        pts.push_back(scan[k]);
         foreign += scan_cluster[k] != cur.cluster;
       }
       if (round == 0 && foreign < kSplitMinPoints) return;
-      std::unique_ptr<SceneData> sd = prepareScene(pts, cfg);
-      sd->whole = &whole;
-      sd->support_seen = &seen;
-      if (light && cfg.check_illumination && !light->empty()) sd->light = light;
       PartDetection r;
-      const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
-      if (!finishPose(*sd, m, cfg, support_plane, cur, T, all_points, true, &r) || !accepted(r, cfg) || r.fitness <= cur.fitness)
+      if (!polishOn(std::move(pts), m, cfg, support_plane, cur, cur.pose.cast<float>(), &whole, &seen, light, &r) ||
+          !accepted(r, cfg) || r.fitness <= cur.fitness)
         break;
       r.coverage = cur.coverage;
       r.score = r.fitness * (cfg.min_coverage > 0 ? r.coverage : 1.0);
-      const PoseError e = poseError(m.info, m.centroid, r.pose, cur.pose);
-      const double step = e.translation + e.rotation * 0.5 * m.diameter;
+      const double step = modelMove(m, cur.pose, r.pose);
       moved += step;
       ++rounds;
       cur = r;
-      T = r.pose.cast<float>();
       if (step < kSplitSettled) break;
     }
     if (rounds == 0) return;
@@ -712,32 +758,13 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
   std::vector<std::shared_ptr<const ModelIndex>> idx(parts.size());
   for (size_t i = 0; i < parts.size(); ++i) library_->model(parts[i].model);  // unknown id: throws first
   parallelFor(parts.size(), cfg.threads, [&](size_t i) { idx[i] = index(parts[i].model); });
-  const float radius = static_cast<float>(cfg.refine_radius);
-  // a scan point's distance to part i's model (Ti: the inverse of its pose); infinite beyond the radius
-  auto distanceTo = [&](size_t i, const Eigen::Isometry3f& Ti, const Vec3& p) { return modelDistance(*idx[i], Ti, p, radius); };
-  std::vector<Eigen::Isometry3f> Tinv(parts.size());
-  std::vector<Vec3> centre(parts.size());
-  std::vector<float> reach(parts.size());
-  for (size_t i = 0; i < parts.size(); ++i) {
-    const Eigen::Isometry3f T = parts[i].pose.cast<float>();
-    Tinv[i] = T.inverse();
-    centre[i] = T * idx[i]->centroid.cast<float>();
-    reach[i] = idx[i]->diameter + radius;  // the centroid lies inside, so no point of the part is farther
-  }
+  std::vector<const ModelIndex*> mi(parts.size());
+  for (size_t i = 0; i < parts.size(); ++i) mi[i] = idx[i].get();
+  const FoundParts found(parts, mi, static_cast<float>(cfg.refine_radius));
   // each scan point goes to the nearest part within the radius
   std::vector<int> owner(scan.points.size(), -1);
   parallelFor(scan.points.size(), cfg.threads, [&](size_t k) {
-    const Vec3& p = scan.points[k];
-    if (!p.allFinite()) return;
-    float best = std::numeric_limits<float>::infinity();
-    for (size_t i = 0; i < parts.size(); ++i) {
-      if ((p - centre[i]).norm() > reach[i]) continue;
-      const float d = distanceTo(i, Tinv[i], p);
-      if (d < best) {
-        best = d;
-        owner[k] = static_cast<int>(i);
-      }
-    }
+    if (scan.points[k].allFinite()) owner[k] = found.owner(scan.points[k]);
   });
   std::vector<std::vector<Vec3>> points(parts.size());
   for (size_t k = 0; k < scan.points.size(); ++k) {
@@ -754,22 +781,16 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
       return;
     }
     const auto t = Clock::now();
-    const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
-    if (points[i].size() > cap) points[i] = capPoints(points[i], cfg.icp_spacing, cap);
-    const std::unique_ptr<SceneData> sd = prepareScene(points[i], cfg);
-    const Eigen::Isometry3f T0 = parts[i].pose.cast<float>();
     PartDetection r;
-    const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
-    if (!finishPose(*sd, m, cfg, support_plane, parts[i], T0, all_points, true, &r) || !accepted(r, cfg)) {
+    if (!polishOn(std::move(points[i]), m, cfg, support_plane, parts[i], parts[i].pose.cast<float>(), nullptr, nullptr,
+                  nullptr, &r) ||
+        !accepted(r, cfg)) {
       why[i] = name + ": the second scan's pose failed validation (fitness " + std::to_string(r.fitness) + ", coverage " +
                std::to_string(r.coverage) + ", rmse " + std::to_string(r.rmse * 1e3) + " mm, see-through " +
                std::to_string(r.see_through) + "): pose kept";
       return;
     }
-    // how far a model point moves, the part's symmetry taken out: its centroid's move plus the
-    // turn's arc at the part's radius
-    const PoseError e = poseError(m.info, m.centroid, r.pose, parts[i].pose);
-    const double shift = e.translation + e.rotation * 0.5 * m.diameter;
+    const double shift = modelMove(m, parts[i].pose, r.pose);
     if (shift > cfg.refine_max_shift) {
       why[i] = name + ": the second scan moves it " + std::to_string(shift * 1e3) + " mm, above refine_max_shift: pose kept";
       return;
