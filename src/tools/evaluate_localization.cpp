@@ -454,6 +454,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   sj["clusters"] = clusters.size();
   sj["locate_seconds"] = st.seconds;
   sj["split_parts_polished"] = st.split_parts_polished;
+  sj["turned_poses"] = st.turned_poses;
   return sj;
 }
 

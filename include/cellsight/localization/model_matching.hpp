@@ -142,6 +142,14 @@ struct MatchingConfig {
   /// refine_radius (docs/localization.md, "Split parts"); false: polished on its cluster only.
   /// Needs fitness_whole_scan (the new pose must explain more of the whole scan).
   bool polish_split_parts = true;
+  /// A part seen from one side can fit the scan turned about the support's normal: a holder
+  /// lying on an arm shows a 30 x 32 mm face either way. The found pose is also turned by a
+  /// quarter, a half and three quarters about the vertical through its scanned points and
+  /// polished; among the accepted poses, those whose RMSE is at most the lowest one divided by
+  /// turned_rmse_ratio compete on score (docs/localization.md, "Turned poses"). Needs the
+  /// support plane (locate() given one); false: the found pose stands.
+  bool turned_poses = true;
+  double turned_rmse_ratio = 0.7;  ///< (0, 1]; 1: the closest fit wins outright
   /// Parts rest on a support (the table the clustering removed): a pose that puts the model more
   /// than this below the support plane is not physical and is discarded before validation
   /// (a thin flat part seen from above fits upside down as well). Used when locate() is given
@@ -224,6 +232,8 @@ struct MatchStats {
   /// moved them in all (m, a model point's move)
   size_t split_parts_polished = 0;
   double split_polish_moved = 0;
+  /// parts whose pose turned about the support's normal fitted the scan closer (turned_poses)
+  size_t turned_poses = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
 };

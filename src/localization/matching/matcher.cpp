@@ -4,6 +4,7 @@
 #include <pcl/search/kdtree.h>
 
 #include <array>
+#include <cmath>
 #include <numeric>
 #include <stdexcept>
 
@@ -16,6 +17,8 @@ namespace {
 
 /// Screened candidates polished per (cluster, model) pair.
 constexpr size_t kPolished = 2;
+/// Turns of a pose within this of one another (rad, modulo the model's symmetry) are one pose.
+constexpr double kSameTurn = 2 * M_PI / 180;
 /// polishSplitParts: a part needs this many points of other clusters or fragments near its model
 /// to be polished again on them; at most this many rounds; a round moving a model point less
 /// than this ends it (m)
@@ -289,6 +292,52 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   }
   fine.refine_seconds = seconds(t_refine);
   return fine;
+}
+
+/// The found pose, or one turned about the support's normal that fits the scan closer
+/// (MatchingConfig::turned_poses). *turned: whether it was turned.
+PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                         const Eigen::Vector4f* support, const PartDetection& found, bool* turned) {
+  *turned = false;
+  if (!support || m.info.symmetry.type == Symmetry::Type::kSpherical || !accepted(found, cfg)) return found;
+  const Eigen::Vector3f up = support->head<3>().normalized();
+  // the turn's axis: the vertical through the scan points the part explains (a turn about the
+  // model's centroid would carry the scanned face away, farther than the polish reaches)
+  const Eigen::Isometry3f T = found.pose.cast<float>();
+  const Eigen::Isometry3f Ti = T.inverse();
+  const float r = static_cast<float>(cfg.fitness_radius);
+  Vec3 pivot = Vec3::Zero();
+  size_t n = 0;
+  for (const auto& p : s.icp_points)
+    if (std::isfinite(modelDistance(m, Ti, p, r))) pivot += p, ++n;
+  if (n < 3) return found;
+  pivot /= static_cast<float>(n);
+  const size_t all_points = static_cast<size_t>(std::max(100.0, cfg.icp_max_points));
+  const size_t screen_points = std::min(all_points, static_cast<size_t>(std::max(100.0, cfg.icp_screen_points)));
+  std::vector<PartDetection> poses{found};
+  for (int k = 1; k < 4; ++k) {
+    const Eigen::Isometry3f Tk =
+        Eigen::Translation3f(pivot) * Eigen::AngleAxisf(static_cast<float>(k * M_PI / 2), up) * Eigen::Translation3f(-pivot) * T;
+    // a turn the model's symmetry undoes is the found pose again (an upright shaft, a holder
+    // standing on its base turned by a half), and a turned pose that screens at less than half
+    // the found one's score is not polished
+    if (poseError(m.info, m.centroid, Tk.cast<double>(), found.pose).rotation < kSameTurn) continue;
+    PartDetection screened, f;
+    if (!finishPose(s, m, cfg, support, found, Tk, screen_points, false, &screened) || screened.score < 0.5 * found.score) continue;
+    if (finishPose(s, m, cfg, support, found, screened.pose.cast<float>(), all_points, true, &f) && accepted(f, cfg))
+      poses.push_back(f);
+  }
+  double closest = found.rmse;
+  for (const auto& p : poses) closest = std::min(closest, p.rmse);
+  // poses that fit about as closely as the closest compete on score; the found one wins ties
+  const PartDetection* best = nullptr;
+  for (const auto& p : poses)
+    if (p.rmse * cfg.turned_rmse_ratio <= closest && (!best || p.score > best->score)) best = &p;
+  *turned = best != &poses.front();
+  PartDetection out = *best;
+  out.coarse_seconds = found.coarse_seconds;
+  out.refine_seconds = found.refine_seconds;
+  return out;
 }
 
 }  // namespace
@@ -669,21 +718,39 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       round[w].per_model[m] = matchPair(*round[w].scene, *idx[m], wcfg[w], support_plane, seed);
       round[w].per_model[m].cluster = round[w].cluster;
     });
+    // each cluster's best part (the model whose accepted pose scores highest), and that pose
+    // turned about the support's normal where that fits closer
+    std::vector<int> best_of(round.size(), -1);
+    for (size_t wi = 0; wi < round.size(); ++wi)
+      for (size_t m = 0; m < models.size(); ++m) {
+        const PartDetection& d = round[wi].per_model[m];
+        if (accepted(d, wcfg[wi]) && (best_of[wi] < 0 || d.score > round[wi].per_model[best_of[wi]].score))
+          best_of[wi] = static_cast<int>(m);
+      }
+    std::vector<PartDetection> chosen(round.size());
+    std::vector<char> turned(round.size(), 0);
+    const auto t_turn = Clock::now();
+    parallelFor(round.size(), cfg.threads, [&](size_t wi) {
+      if (best_of[wi] < 0) return;
+      const PartDetection& d = round[wi].per_model[best_of[wi]];
+      bool t = false;
+      chosen[wi] = cfg.turned_poses ? turnedPose(*round[wi].scene, *idx[best_of[wi]], wcfg[wi], support_plane, d, &t) : d;
+      chosen[wi].cluster = d.cluster;
+      turned[wi] = t;
+    });
+    if (cfg.turned_poses) st.refine_seconds += seconds(t_turn);
     std::vector<Work> next;
     for (size_t wi = 0; wi < round.size(); ++wi) {
       Work& w = round[wi];
-      const PartDetection* best = nullptr;
-      size_t best_m = 0;
       for (size_t m = 0; m < models.size(); ++m) {
         const PartDetection& d = w.per_model[m];
         st.coarse_seconds += d.coarse_seconds;
         st.refine_seconds += d.refine_seconds;
         if (!d.model.empty() && !accepted(d, wcfg[wi])) st.rejected.push_back(d);
-        if (accepted(d, wcfg[wi]) && (!best || d.score > best->score)) {
-          best = &d;
-          best_m = m;
-        }
       }
+      const PartDetection* best = best_of[wi] < 0 ? nullptr : &chosen[wi];
+      const size_t best_m = best_of[wi] < 0 ? 0 : static_cast<size_t>(best_of[wi]);
+      st.turned_poses += turned[wi];
       if (!best) {
         // nothing explains enough of the cluster: it may hold two touching parts that
         // clustering could not split; searched once more asking half the coverage (the part
