@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <random>
 
 #include "cellsight/common/errors.hpp"
@@ -344,6 +345,22 @@ TEST(ModelMatching, APartlyLitFlangeIsLaidByItsEnd) {
   EXPECT_LT(with.rotation, 1 * M_PI / 180);
 }
 
+namespace {
+/// Recorded clusters of a tuning cell (capture seed 1's calibration) located among `models`
+/// with the shipped settings as `set` changes them, on the table z = 0 with the scan's sweep:
+/// the error of the one detection against the part's true pose (1e9 unless exactly one).
+PoseError locateRecorded(const std::vector<ScanCloud>& clusters, const std::string& model, const LightSweep& sweep,
+                         const Eigen::Isometry3d& truth, const std::function<void(MatchingConfig&)>& set, MatchStats* st) {
+  MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
+  c.viewpoint = kEye;
+  set(c);
+  const Eigen::Vector4f table(0, 0, 1, 0);
+  ModelMatcher m(library(), c);
+  const auto d = m.locate(clusters, {model}, st, nullptr, &table, nullptr, &sweep);
+  return d.size() != 1 ? PoseError{1e9, 1e9} : poseError(library()->model(model).info, m.centroid(model), d[0].pose, truth);
+}
+}  // namespace
+
 // A blade lying flat, recorded in generated cell 3044 (capture seed 1's calibration, with the
 // scan's sweep): clustering split it, the blade's top in one cluster, its root block's top,
 // 10 mm higher across steep unmeasured sides, in another. Polished on the blade's top alone it
@@ -358,14 +375,8 @@ TEST(ModelMatching, APartThatClusteringSplitIsPolishedOnBothPieces) {
   const LightSweep sweep = loadSweep(kData + "sweep_3044.txt");
   const Eigen::Isometry3d truth = truePose({0.43718378152497961, -0.019730066610289983, 0.00050000054761767377},
                                            {0.3255348811600759, 0, 0, 0.9455300318594303});
-  MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
-  c.viewpoint = kEye;
-  const Eigen::Vector4f table(0, 0, 1, 0);
   auto run = [&](bool split, MatchStats* st) {
-    c.polish_split_parts = split;
-    ModelMatcher m(library(), c);
-    const auto d = m.locate({blade, root}, {"blade"}, st, nullptr, &table, nullptr, &sweep);
-    return d.size() != 1 ? PoseError{1e9, 1e9} : poseError(library()->model("blade").info, m.centroid("blade"), d[0].pose, truth);
+    return locateRecorded({blade, root}, "blade", sweep, truth, [&](MatchingConfig& c) { c.polish_split_parts = split; }, st);
   };
   MatchStats one, both;
   const PoseError alone = run(false, &one), polished = run(true, &both);
@@ -390,14 +401,8 @@ TEST(ModelMatching, AHolderFoundTurnedAboutTheVerticalIsTurnedBack) {
   const LightSweep sweep = loadSweep(kData + "sweep_3057.txt");
   const Eigen::Isometry3d truth = truePose({0.6478663229141447, 0.0031897051618338199, 0.02500000037252903},
                                            {0.095751138977414677, -0.7005938333903089, 0.095751138977414663, 0.7005938333903089});
-  MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
-  c.viewpoint = kEye;
-  const Eigen::Vector4f table(0, 0, 1, 0);
   auto run = [&](bool turn, MatchStats* st) {
-    c.turned_poses = turn;
-    ModelMatcher m(library(), c);
-    const auto d = m.locate({holder}, {"holder"}, st, nullptr, &table, nullptr, &sweep);
-    return d.size() != 1 ? PoseError{1e9, 1e9} : poseError(library()->model("holder").info, m.centroid("holder"), d[0].pose, truth);
+    return locateRecorded({holder}, "holder", sweep, truth, [&](MatchingConfig& c) { c.turned_poses = turn; }, st);
   };
   MatchStats off, on;
   const PoseError found = run(false, &off), turned = run(true, &on);
@@ -723,32 +728,26 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
   // the shipped settings load; a typo names file and key
   EXPECT_EQ(loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml").coarse, "ppf");
   const std::string path = ::testing::TempDir() + "/matching_typo.yaml";
-  std::ofstream(path) << "voxel: 0.002\nfitnes_radius: 0.002\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("fitnes_radius"), std::string::npos);
-  std::ofstream(path) << "min_fitness: 1.5\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("min_fitness"), std::string::npos);
-  std::ofstream(path) << "ppf_max_bucket: 0\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("ppf_max_bucket"), std::string::npos);
-  std::ofstream(path) << "refine_candidates_near: 1.2\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("refine_candidates_near"), std::string::npos);
-  std::ofstream(path) << "max_view_angle: 1.0\nunseen_view_angle: 1.2\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("unseen_view_angle"), std::string::npos);
-  std::ofstream(path) << "max_unseen: -0.1\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("max_unseen"), std::string::npos);
-  std::ofstream(path) << "fitness_incidence_mid: 1.5\n";  // beyond max_view_angle
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("fitness_incidence_mid"), std::string::npos);
-  std::ofstream(path) << "fitness_incidence_width: 0\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("fitness_incidence_width"), std::string::npos);
-  std::ofstream(path) << "rest_candidates: -1\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("rest_candidates"), std::string::npos);
-  std::ofstream(path) << "rest_yaw_step: 0\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("rest_yaw_step"), std::string::npos);
-  std::ofstream(path) << "turned_rmse_ratio: 0\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("turned_rmse_ratio"), std::string::npos);
-  std::ofstream(path) << "turned_rmse_ratio: 1.5\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("turned_rmse_ratio"), std::string::npos);
-  std::ofstream(path) << "turned_poses: maybe\n";
-  EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find("turned_poses"), std::string::npos);
+  // each file is refused with an error naming the key
+  const std::pair<const char*, const char*> refused[] = {
+      {"voxel: 0.002\nfitnes_radius: 0.002\n", "fitnes_radius"},
+      {"min_fitness: 1.5\n", "min_fitness"},
+      {"ppf_max_bucket: 0\n", "ppf_max_bucket"},
+      {"refine_candidates_near: 1.2\n", "refine_candidates_near"},
+      {"max_view_angle: 1.0\nunseen_view_angle: 1.2\n", "unseen_view_angle"},
+      {"max_unseen: -0.1\n", "max_unseen"},
+      {"fitness_incidence_mid: 1.5\n", "fitness_incidence_mid"},  // beyond max_view_angle
+      {"fitness_incidence_width: 0\n", "fitness_incidence_width"},
+      {"rest_candidates: -1\n", "rest_candidates"},
+      {"rest_yaw_step: 0\n", "rest_yaw_step"},
+      {"turned_rmse_ratio: 0\n", "turned_rmse_ratio"},
+      {"turned_rmse_ratio: 1.5\n", "turned_rmse_ratio"},
+      {"turned_poses: maybe\n", "turned_poses"},
+  };
+  for (const auto& [yaml, key] : refused) {
+    std::ofstream(path) << yaml;
+    EXPECT_NE(errorOf([&] { loadMatchingConfig(path); }).find(key), std::string::npos) << yaml;
+  }
 }
 
 // A box rests on each of its six sides, the largest first, its origin half its thickness up; with
