@@ -725,6 +725,9 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
   MatchingConfig bad = config();
   bad.coarse = "magic";
   EXPECT_THROW(ModelMatcher(library(), bad), std::invalid_argument);
+  MatchingConfig ratio = config();
+  ratio.turned_rmse_ratio = 1.5;  // no pose could fit within it of the closest
+  EXPECT_THROW(ModelMatcher(library(), ratio), std::invalid_argument);
   // the shipped settings load; a typo names file and key
   EXPECT_EQ(loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml").coarse, "ppf");
   const std::string path = ::testing::TempDir() + "/matching_typo.yaml";

@@ -232,7 +232,8 @@ struct MatchStats {
   /// moved them in all (m, a model point's move)
   size_t split_parts_polished = 0;
   double split_polish_moved = 0;
-  /// parts whose pose turned about the support's normal fitted the scan closer (turned_poses)
+  /// parts whose pose turned about the support's normal fitted the scan about as closely and
+  /// scored higher (turned_poses; counted before the pieces of split parts are merged)
   size_t turned_poses = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;

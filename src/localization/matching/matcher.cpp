@@ -294,8 +294,9 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   return fine;
 }
 
-/// The found pose, or one turned about the support's normal that fits the scan closer
-/// (MatchingConfig::turned_poses). *turned: whether it was turned.
+/// The found pose, or one turned about the support's normal that fits the scan about as closely
+/// (RMSE within turned_rmse_ratio of the closest) and scores higher (MatchingConfig::turned_poses).
+/// *turned: whether it was turned.
 PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                          const Eigen::Vector4f* support, const PartDetection& found, bool* turned) {
   *turned = false;
@@ -318,9 +319,9 @@ PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, 
   for (int k = 1; k < 4; ++k) {
     const Eigen::Isometry3f Tk =
         Eigen::Translation3f(pivot) * Eigen::AngleAxisf(static_cast<float>(k * M_PI / 2), up) * Eigen::Translation3f(-pivot) * T;
-    // a turn the model's symmetry undoes is the found pose again (an upright shaft, a holder
-    // standing on its base turned by a half), and a turned pose that screens at less than half
-    // the found one's score is not polished
+    // a turn the model's symmetry undoes (an upright shaft, a holder standing on its base
+    // turned by a half) leaves the found pose shifted sideways at most, which the polish would
+    // undo; and a turned pose that screens at less than half the found one's score is not polished
     if (poseError(m.info, m.centroid, Tk.cast<double>(), found.pose).rotation < kSameTurn) continue;
     PartDetection screened, f;
     if (!finishPose(s, m, cfg, support, found, Tk, screen_points, false, &screened) || screened.score < 0.5 * found.score) continue;
@@ -333,11 +334,9 @@ PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, 
   const PartDetection* best = nullptr;
   for (const auto& p : poses)
     if (p.rmse * cfg.turned_rmse_ratio <= closest && (!best || p.score > best->score)) best = &p;
+  if (!best) return found;  // a ratio outside (0, 1] (the constructor refuses it)
   *turned = best != &poses.front();
-  PartDetection out = *best;
-  out.coarse_seconds = found.coarse_seconds;
-  out.refine_seconds = found.refine_seconds;
-  return out;
+  return *best;
 }
 
 }  // namespace
@@ -353,6 +352,10 @@ ModelMatcher::ModelMatcher(std::shared_ptr<const ModelLibrary> library, const Ma
   }
   if (config_.scene_search != "grid" && config_.scene_search != "kdtree") {
     throw std::invalid_argument("ModelMatcher: scene_search must be 'grid' or 'kdtree' (got '" + config_.scene_search + "')");
+  }
+  if (!(config_.turned_rmse_ratio > 0 && config_.turned_rmse_ratio <= 1)) {
+    throw std::invalid_argument("ModelMatcher: turned_rmse_ratio must be in (0, 1] (got " +
+                                std::to_string(config_.turned_rmse_ratio) + ")");
   }
   if (config_.threads <= 0) config_.threads = std::max(1u, std::thread::hardware_concurrency());
   if (config_.descriptor == "learned" && config_.coarse != "ppf") {
