@@ -329,12 +329,12 @@ PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, 
       poses.push_back(f);
   }
   double closest = found.rmse;
-  for (const auto& p : poses) closest = std::min(closest, p.rmse);
+  for (size_t k = 1; k < poses.size(); ++k) closest = std::min(closest, poses[k].rmse);
   // poses that fit about as closely as the closest compete on score; the found one wins ties
+  // (turned_rmse_ratio <= 1, the constructor's check: the closest always qualifies)
   const PartDetection* best = nullptr;
   for (const auto& p : poses)
     if (p.rmse * cfg.turned_rmse_ratio <= closest && (!best || p.score > best->score)) best = &p;
-  if (!best) return found;  // a ratio outside (0, 1] (the constructor refuses it)
   *turned = best != &poses.front();
   return *best;
 }
@@ -731,17 +731,19 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
           best_of[wi] = static_cast<int>(m);
       }
     std::vector<PartDetection> chosen(round.size());
+    for (size_t wi = 0; wi < round.size(); ++wi)
+      if (best_of[wi] >= 0) chosen[wi] = round[wi].per_model[best_of[wi]];
     std::vector<char> turned(round.size(), 0);
-    const auto t_turn = Clock::now();
-    parallelFor(round.size(), cfg.threads, [&](size_t wi) {
-      if (best_of[wi] < 0) return;
-      const PartDetection& d = round[wi].per_model[best_of[wi]];
-      bool t = false;
-      chosen[wi] = cfg.turned_poses ? turnedPose(*round[wi].scene, *idx[best_of[wi]], wcfg[wi], support_plane, d, &t) : d;
-      chosen[wi].cluster = d.cluster;
-      turned[wi] = t;
-    });
-    if (cfg.turned_poses) st.refine_seconds += seconds(t_turn);
+    if (cfg.turned_poses) {
+      const auto t_turn = Clock::now();
+      parallelFor(round.size(), cfg.threads, [&](size_t wi) {
+        if (best_of[wi] < 0) return;
+        bool t = false;
+        chosen[wi] = turnedPose(*round[wi].scene, *idx[best_of[wi]], wcfg[wi], support_plane, chosen[wi], &t);
+        turned[wi] = t;
+      });
+      st.refine_seconds += seconds(t_turn);
+    }
     std::vector<Work> next;
     for (size_t wi = 0; wi < round.size(); ++wi) {
       Work& w = round[wi];
