@@ -172,6 +172,10 @@ struct MatchingConfig {
   /// its edges, at grazing angles or in another part's shadow. Needs the LightSweep; 1: off.
   double max_unseen = 1.0;
   double unseen_radius = 0.003;      ///< m
+  /// Once every part is found, each cluster's best pose refused for unseen surface alone, clear of
+  /// the parts found, is tested again with their models stopping rays and beams too (a part whose
+  /// side towards it was not measured still shades it), and accepted if it passes then.
+  bool unseen_second_look = true;
   double unseen_view_angle = 1.05;   ///< rad
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
@@ -235,6 +239,9 @@ struct MatchStats {
   /// parts whose pose turned about the support's normal fitted the scan about as closely and
   /// scored higher (turned_poses; counted before the pieces of split parts are merged)
   size_t turned_poses = 0;
+  /// parts refused for unseen surface alone and accepted at a second look, the parts found
+  /// casting their shadows (unseen_second_look)
+  size_t unseen_second_look = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
 };

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cmath>
+#include <map>
 #include <numeric>
 #include <stdexcept>
 
@@ -589,6 +590,70 @@ void polishSplitParts(std::vector<PartDetection>& parts, const std::vector<std::
   }
 }
 
+/// A second look at refused poses: per cluster, the best pose refused for unseen surface alone
+/// that lies clear of every part found is tested again with those parts as occluders, and
+/// accepted if it passes then.
+/// The unseen test counts a model point the scan would have measured, with nothing the scan saw
+/// on its camera ray or its beam; a part beside it whose side towards it was not measured (too
+/// steep for the camera) still shades it, and only its model, once found, shows that.
+void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                      const std::vector<std::string>& models, const std::vector<ScanCloud>& clusters, const PointGrid& whole,
+                      const SupportSeen& seen, const LightSweep* light, const MatchingConfig& cfg, MatchStats& st) {
+  auto indexOf = [&](const std::string& id) { return idx[std::find(models.begin(), models.end(), id) - models.begin()].get(); };
+  std::vector<std::pair<const ModelMatcher::ModelIndex*, Eigen::Isometry3f>> found;
+  for (const auto& k : kept) found.emplace_back(indexOf(k.model), k.pose.cast<float>().inverse());
+  // clear of every part found: its centre farther from theirs than a quarter of the two sizes
+  // (a wrong pose of a found part's points, or the same part found from another piece, is not)
+  auto clear = [&](const PartDetection& d) {
+    const ModelMatcher::ModelIndex& m = *indexOf(d.model);
+    const Eigen::Vector3d c = d.pose * m.centroid;
+    for (size_t k = 0; k < kept.size(); ++k) {
+      const ModelMatcher::ModelIndex& o = *indexOf(kept[k].model);
+      if ((kept[k].pose * o.centroid - c).norm() < 0.25 * (m.diameter + o.diameter)) return false;
+    }
+    return true;
+  };
+  // per cluster, its best refused pose that passes every test but the unseen one
+  std::map<int, size_t> look;
+  for (size_t i = 0; i < st.rejected.size(); ++i) {
+    const PartDetection& d = st.rejected[i];
+    if (d.cluster < 0 || static_cast<size_t>(d.cluster) >= clusters.size()) continue;
+    PartDetection seen_all = d;
+    seen_all.unseen = 0;
+    if (d.unseen <= cfg.max_unseen || !accepted(seen_all, cfg) || !clear(d)) continue;
+    const auto it = look.find(d.cluster);
+    if (it == look.end() || d.score > st.rejected[it->second].score) look[d.cluster] = i;
+  }
+  std::vector<size_t> accepted_now;
+  for (const auto& [cluster, i] : look) {
+    const PartDetection& d = st.rejected[i];
+    const ModelMatcher::ModelIndex& m = *indexOf(d.model);
+    if (!clear(d)) continue;  // a part this second look accepted lies there
+    std::vector<Vec3> points;
+    for (const auto& p : clusters[cluster].points)
+      if (p.allFinite()) points.push_back(p);
+    const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
+    if (points.size() > cap) points = capPoints(points, cfg.icp_spacing, cap);
+    if (points.size() < 3) continue;
+    const std::unique_ptr<SceneData> sd = prepareScene(points, cfg);
+    if (whole.size() > 0) sd->whole = &whole;
+    sd->support_seen = &seen;
+    sd->light = light;
+    sd->found = &found;
+    double unseen = 0;
+    visibleFitness(*sd, m, d.pose.cast<float>(), cfg, nullptr, &unseen);
+    if (unseen > cfg.max_unseen) continue;
+    PartDetection a = d;
+    a.unseen = unseen;
+    a.pose = canonicalPose(m.info, m.centroid, a.pose);
+    kept.push_back(a);
+    accepted_now.push_back(i);
+  }
+  std::sort(accepted_now.rbegin(), accepted_now.rend());
+  for (size_t i : accepted_now) st.rejected.erase(st.rejected.begin() + static_cast<long>(i));
+  st.unseen_second_look += accepted_now.size();
+}
+
 }  // namespace
 
 std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& clusters,
@@ -815,6 +880,11 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     const auto t_split = Clock::now();
     polishSplitParts(kept, idx, models, scan, scan_cluster, whole, seen, light, support_plane, cfg, st);
     st.refine_seconds += seconds(t_split);
+  }
+  if (cfg.unseen_second_look && light && cfg.check_illumination && !light->empty() && cfg.max_unseen < 1 && !kept.empty()) {
+    const auto t_look = Clock::now();
+    unseenSecondLook(kept, idx, models, clusters, whole, seen, light, cfg, st);
+    st.refine_seconds += seconds(t_look);
   }
   st.seconds = seconds(t0);
   return kept;

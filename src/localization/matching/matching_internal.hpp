@@ -194,6 +194,9 @@ struct SceneData {
   /// every cluster's points (shared by the clusters of one locate() call; null: this cluster's):
   /// the fitness test, so that a part that clustering split is not short of its own points
   const PointGrid* whole = nullptr;
+  /// parts already found, each its model and T_model_scene: the unseen test's rays and beams stop
+  /// at them too (a found part's side the scan did not measure still casts its shadow); null: none
+  const std::vector<std::pair<const ModelMatcher::ModelIndex*, Eigen::Isometry3f>>* found = nullptr;
   std::vector<Vec3> all;       // finite input points
   ScanCloud coarse;            // voxelised, normals toward the viewpoint
   std::vector<Fpfh> fpfh;

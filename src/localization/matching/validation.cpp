@@ -117,6 +117,9 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     const Vec3 dir = ray.normalized();
     for (float t = r_unseen; t < len; t += step)
       if (scan->anyWithin(p + t * dir, step)) return false;
+    if (s.found)
+      for (const auto& [part, Tp] : *s.found)
+        if (part->has_mesh && part->caster.occluded(Tp * p, Tp.linear() * dir, r_unseen, len)) return false;
     return true;
   };
   // the unseen test's model points: 1 visible and lit, 2 also a candidate miss
