@@ -346,6 +346,22 @@ TEST(ModelMatching, APartlyLitFlangeIsLaidByItsEnd) {
 }
 
 namespace {
+/// Clusters of one generated cell recorded in test/localization/data (each file's point count
+/// checked) and the scan's sweep.
+struct RecordedCell {
+  std::vector<ScanCloud> clusters;
+  LightSweep sweep;
+};
+RecordedCell recordedCell(const std::vector<std::pair<std::string, size_t>>& clusters, const std::string& sweep) {
+  RecordedCell cell;
+  for (const auto& [file, points] : clusters) {
+    cell.clusters.push_back(loadCloud(kData + file));
+    EXPECT_EQ(cell.clusters.back().size(), points) << file;
+  }
+  cell.sweep = loadSweep(kData + sweep);
+  return cell;
+}
+
 /// Recorded clusters of a tuning cell (capture seed 1's calibration) located among `models`
 /// with the shipped settings as `set` changes them, on the table z = 0 with the scan's sweep:
 /// the error of the one detection against the part's true pose (1e9 unless exactly one).
@@ -368,15 +384,11 @@ PoseError locateRecorded(const std::vector<ScanCloud>& clusters, const std::stri
 // millimetre at each edge, so the edges pin it only to several millimetres. Polished again on
 // the root block's points too (polish_split_parts), it is found where it lies.
 TEST(ModelMatching, APartThatClusteringSplitIsPolishedOnBothPieces) {
-  const ScanCloud blade = loadCloud(kData + "blade_lying_flat_3044.ply");
-  const ScanCloud root = loadCloud(kData + "blade_root_top_3044.ply");
-  ASSERT_EQ(blade.size(), 668u);
-  ASSERT_EQ(root.size(), 327u);
-  const LightSweep sweep = loadSweep(kData + "sweep_3044.txt");
+  const RecordedCell cell = recordedCell({{"blade_lying_flat_3044.ply", 668}, {"blade_root_top_3044.ply", 327}}, "sweep_3044.txt");
   const Eigen::Isometry3d truth = truePose({0.43718378152497961, -0.019730066610289983, 0.00050000054761767377},
                                            {0.3255348811600759, 0, 0, 0.9455300318594303});
   auto run = [&](bool split, MatchStats* st) {
-    return locateRecorded({blade, root}, "blade", sweep, truth, [&](MatchingConfig& c) { c.polish_split_parts = split; }, st);
+    return locateRecorded(cell.clusters, "blade", cell.sweep, truth, [&](MatchingConfig& c) { c.polish_split_parts = split; }, st);
   };
   MatchStats one, both;
   const PoseError alone = run(false, &one), polished = run(true, &both);
@@ -396,13 +408,11 @@ TEST(ModelMatching, APartThatClusteringSplitIsPolishedOnBothPieces) {
 // higher (cell 3057, capture seed 1: fitness 0.93 against 0.83). It fits the scan less closely
 // (RMSE 0.077 against 0.042 mm): the turned poses are polished too, and the closest fits compete.
 TEST(ModelMatching, AHolderFoundTurnedAboutTheVerticalIsTurnedBack) {
-  const ScanCloud holder = loadCloud(kData + "holder_on_an_arm_3057.ply");
-  ASSERT_EQ(holder.size(), 501u);
-  const LightSweep sweep = loadSweep(kData + "sweep_3057.txt");
+  const RecordedCell cell = recordedCell({{"holder_on_an_arm_3057.ply", 501}}, "sweep_3057.txt");
   const Eigen::Isometry3d truth = truePose({0.6478663229141447, 0.0031897051618338199, 0.02500000037252903},
                                            {0.095751138977414677, -0.7005938333903089, 0.095751138977414663, 0.7005938333903089});
   auto run = [&](bool turn, MatchStats* st) {
-    return locateRecorded({holder}, "holder", sweep, truth, [&](MatchingConfig& c) { c.turned_poses = turn; }, st);
+    return locateRecorded(cell.clusters, "holder", cell.sweep, truth, [&](MatchingConfig& c) { c.turned_poses = turn; }, st);
   };
   MatchStats off, on;
   const PoseError found = run(false, &off), turned = run(true, &on);
@@ -423,15 +433,11 @@ TEST(ModelMatching, AHolderFoundTurnedAboutTheVerticalIsTurnedBack) {
 // evaluation's run): with a quota of three or four rest poses it is never refined and nothing is
 // found; with the shipped twelve it is.
 TEST(ModelMatching, ARestPoseTiedWithTurnedOnesIsWithinTheQuota) {
-  const ScanCloud face = loadCloud(kData + "housing_end_face_3052.ply");
-  const ScanCloud lug = loadCloud(kData + "housing_boss_and_lug_3052.ply");
-  ASSERT_EQ(face.size(), 294u);
-  ASSERT_EQ(lug.size(), 140u);
-  const LightSweep sweep = loadSweep(kData + "sweep_3052.txt");
+  const RecordedCell cell = recordedCell({{"housing_end_face_3052.ply", 294}, {"housing_boss_and_lug_3052.ply", 140}}, "sweep_3052.txt");
   const Eigen::Isometry3d truth = truePose({0.64308827300528981, -0.014122856568134931, 0.035000000149011612},
                                            {0.617263164711773, -0.34494374250014548, 0.61726316471177278, 0.34494374250014553});
   auto run = [&](int quota) {
-    return locateRecorded({face, lug}, "housing", sweep, truth, [&](MatchingConfig& c) { c.rest_candidates = quota; }, nullptr);
+    return locateRecorded(cell.clusters, "housing", cell.sweep, truth, [&](MatchingConfig& c) { c.rest_candidates = quota; }, nullptr);
   };
   const PoseError four = run(4), twelve = run(12);
   std::printf("12 rest poses: %.2f mm, %.2f deg off\n", twelve.translation * 1e3, twelve.rotation * 180 / M_PI);
@@ -446,16 +452,14 @@ TEST(ModelMatching, ARestPoseTiedWithTurnedOnesIsWithinTheQuota) {
 // the shaft's shadow, but the shaft's side that casts it was not measured, so no scan point lies
 // on those beams. Looked at again with the shaft's model shading it, the sphere is found.
 TEST(ModelMatching, APartShadedByAFoundPartIsLookedAtAgain) {
-  const ScanCloud cluster = loadCloud(kData + "shaft_and_sphere_3156.ply");
-  ASSERT_EQ(cluster.size(), 742u);
-  const LightSweep sweep = loadSweep(kData + "sweep_3156.txt");
+  const RecordedCell cell = recordedCell({{"shaft_and_sphere_3156.ply", 742}}, "sweep_3156.txt");
   const Eigen::Isometry3d sphere = truePose({0.37548552399439833, -0.019222545979400714, 0}, {1, 0, 0, 0});
   MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
   c.viewpoint = kEye;
   const Eigen::Vector4f table(0, 0, 1, 0);
   auto run = [&](bool look, MatchStats* st) {
     c.unseen_second_look = look;
-    return ModelMatcher(library(), c).locate({cluster}, {"flanged_shaft", "sphere25"}, st, nullptr, &table, nullptr, &sweep);
+    return ModelMatcher(library(), c).locate(cell.clusters, {"flanged_shaft", "sphere25"}, st, nullptr, &table, nullptr, &cell.sweep);
   };
   MatchStats once, twice;
   const auto first = run(false, &once), second = run(true, &twice);
