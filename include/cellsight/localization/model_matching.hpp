@@ -172,11 +172,11 @@ struct MatchingConfig {
   /// its edges, at grazing angles or in another part's shadow. Needs the LightSweep; 1: off.
   double max_unseen = 1.0;
   double unseen_radius = 0.003;      ///< m
+  double unseen_view_angle = 1.05;   ///< rad
   /// Once every part is found, each cluster's best pose refused for unseen surface alone, clear of
   /// the parts found, is tested again with their models stopping rays and beams too (a part whose
   /// side towards it was not measured still shades it), and accepted if it passes then.
   bool unseen_second_look = true;
-  double unseen_view_angle = 1.05;   ///< rad
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
   /// The fitness (PartDetection::fitness, and so the ranking) weighs each visible point by the share of

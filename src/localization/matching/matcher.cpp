@@ -881,7 +881,8 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     polishSplitParts(kept, idx, models, scan, scan_cluster, whole, seen, light, support_plane, cfg, st);
     st.refine_seconds += seconds(t_split);
   }
-  if (cfg.unseen_second_look && light && cfg.check_illumination && !light->empty() && cfg.max_unseen < 1 && !kept.empty()) {
+  if (cfg.unseen_second_look && light && cfg.check_illumination && cfg.check_visibility && !light->empty() && cfg.max_unseen < 1 &&
+      !kept.empty()) {
     const auto t_look = Clock::now();
     unseenSecondLook(kept, idx, models, clusters, whole, seen, light, cfg, st);
     st.refine_seconds += seconds(t_look);

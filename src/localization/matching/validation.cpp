@@ -117,9 +117,15 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     const Vec3 dir = ray.normalized();
     for (float t = r_unseen; t < len; t += step)
       if (scan->anyWithin(p + t * dir, step)) return false;
+    // a found part's mesh stops it where the path enters it (a path that first leaves a mesh
+    // starts inside that part: overlap, which must not pass for shade)
     if (s.found)
-      for (const auto& [part, Tp] : *s.found)
-        if (part->has_mesh && part->caster.occluded(Tp * p, Tp.linear() * dir, r_unseen, len)) return false;
+      for (const auto& [part, Tp] : *s.found) {
+        if (!part->has_mesh) continue;
+        const Vec3 d = Tp.linear() * dir;
+        const RayHit hit = part->caster.intersect(Tp * p, d, r_unseen, len);
+        if (hit.hit && hit.normal.dot(d) < 0) return false;
+      }
     return true;
   };
   // the unseen test's model points: 1 visible and lit, 2 also a candidate miss
