@@ -533,6 +533,12 @@ namespace {
 /// A part that clustering split (a blade lying flat: its root block's top apart from the blade's)
 /// was polished on the piece it was found in, and a flat piece leaves it free to slide: along a
 /// tapered blade the scanner's edge loss lets it slide millimetres (tuning cell 3044: 5.4 mm).
+/// The index of model `id` among the call's `models` (idx[i] indexes models[i]; id is one of them).
+const ModelMatcher::ModelIndex& indexOf(const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                                        const std::vector<std::string>& models, const std::string& id) {
+  return *idx[std::find(models.begin(), models.end(), id) - models.begin()];
+}
+
 /// Each found part with at least kSplitMinPoints points of other clusters or fragments within
 /// refine_radius of its model is polished again, on every scan point within refine_radius of its
 /// model that lies nearer it than any other found part's, up to kSplitRounds times while it moves
@@ -545,7 +551,7 @@ void polishSplitParts(std::vector<PartDetection>& parts, const std::vector<std::
                       MatchStats& st) {
   std::vector<const ModelMatcher::ModelIndex*> mi(parts.size());
   for (size_t i = 0; i < parts.size(); ++i)
-    mi[i] = idx[std::find(models.begin(), models.end(), parts[i].model) - models.begin()].get();
+    mi[i] = &indexOf(idx, models, parts[i].model);
   const FoundParts found(parts, mi, static_cast<float>(cfg.refine_radius));
   std::vector<double> moves(parts.size(), -1.0);
   parallelFor(parts.size(), cfg.threads, [&](size_t i) {
@@ -599,16 +605,15 @@ void polishSplitParts(std::vector<PartDetection>& parts, const std::vector<std::
 void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
                       const std::vector<std::string>& models, const std::vector<ScanCloud>& clusters, const PointGrid& whole,
                       const SupportSeen& seen, const LightSweep* light, const MatchingConfig& cfg, MatchStats& st) {
-  auto indexOf = [&](const std::string& id) { return idx[std::find(models.begin(), models.end(), id) - models.begin()].get(); };
   std::vector<std::pair<const ModelMatcher::ModelIndex*, Eigen::Isometry3f>> found;
-  for (const auto& k : kept) found.emplace_back(indexOf(k.model), k.pose.cast<float>().inverse());
+  for (const auto& k : kept) found.emplace_back(&indexOf(idx, models, k.model), k.pose.cast<float>().inverse());
   // clear of every part found: its centre farther from theirs than a quarter of the two sizes
   // (a wrong pose of a found part's points, or the same part found from another piece, is not)
   auto clear = [&](const PartDetection& d) {
-    const ModelMatcher::ModelIndex& m = *indexOf(d.model);
+    const ModelMatcher::ModelIndex& m = indexOf(idx, models, d.model);
     const Eigen::Vector3d c = d.pose * m.centroid;
     for (size_t k = 0; k < kept.size(); ++k) {
-      const ModelMatcher::ModelIndex& o = *indexOf(kept[k].model);
+      const ModelMatcher::ModelIndex& o = indexOf(idx, models, kept[k].model);
       if ((kept[k].pose * o.centroid - c).norm() < 0.25 * (m.diameter + o.diameter)) return false;
     }
     return true;
@@ -627,7 +632,7 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
   std::vector<size_t> accepted_now;
   for (const auto& [cluster, i] : look) {
     const PartDetection& d = st.rejected[i];
-    const ModelMatcher::ModelIndex& m = *indexOf(d.model);
+    const ModelMatcher::ModelIndex& m = indexOf(idx, models, d.model);
     if (!clear(d)) continue;  // a part this second look accepted lies there
     std::vector<Vec3> points;
     for (const auto& p : clusters[cluster].points)
@@ -862,7 +867,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
   std::vector<bool> drop(out.size(), false);
   for (size_t i = 0; i < order.size(); ++i) {
     const PartDetection& d = out[order[i]];
-    const auto& mi = *idx[std::find(models.begin(), models.end(), d.model) - models.begin()];
+    const auto& mi = indexOf(idx, models, d.model);
     for (size_t j = 0; j < i && !drop[order[i]]; ++j) {
       const PartDetection& k = out[order[j]];
       if (drop[order[j]] || k.model != d.model) continue;
