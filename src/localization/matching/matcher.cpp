@@ -530,15 +530,15 @@ Eigen::Vector3d ModelMatcher::centroid(const std::string& model) const { return 
 
 namespace {
 
-/// A part that clustering split (a blade lying flat: its root block's top apart from the blade's)
-/// was polished on the piece it was found in, and a flat piece leaves it free to slide: along a
-/// tapered blade the scanner's edge loss lets it slide millimetres (tuning cell 3044: 5.4 mm).
 /// The index of model `id` among the call's `models` (idx[i] indexes models[i]; id is one of them).
 const ModelMatcher::ModelIndex& indexOf(const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
                                         const std::vector<std::string>& models, const std::string& id) {
   return *idx[std::find(models.begin(), models.end(), id) - models.begin()];
 }
 
+/// A part that clustering split (a blade lying flat: its root block's top apart from the blade's)
+/// was polished on the piece it was found in, and a flat piece leaves it free to slide: along a
+/// tapered blade the scanner's edge loss lets it slide millimetres (tuning cell 3044: 5.4 mm).
 /// Each found part with at least kSplitMinPoints points of other clusters or fragments within
 /// refine_radius of its model is polished again, on every scan point within refine_radius of its
 /// model that lies nearer it than any other found part's, up to kSplitRounds times while it moves
