@@ -177,6 +177,11 @@ struct MatchingConfig {
   /// the parts found, is tested again with their models stopping rays and beams too (a part whose
   /// side towards it was not measured still shades it), and accepted if it passes then.
   bool unseen_second_look = true;
+  /// Once every part is found, each cluster's best refused pose clear of them, whose model lies
+  /// near points of other clusters or fragments (a part that clustering split, its small piece
+  /// matched millimetres off), is polished on the scan points near its model and accepted if it
+  /// passes every test then (docs/localization.md, "Split parts"). Needs fitness_whole_scan.
+  bool split_second_look = true;
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"
   /// The fitness (PartDetection::fitness, and so the ranking) weighs each visible point by the share of
@@ -242,6 +247,8 @@ struct MatchStats {
   /// parts refused for unseen surface alone and accepted at a second look, the parts found
   /// casting their shadows (unseen_second_look)
   size_t unseen_second_look = 0;
+  /// refused poses of split parts polished on the points near them and accepted (split_second_look)
+  size_t split_second_look = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
 };

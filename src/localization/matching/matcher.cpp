@@ -596,6 +596,30 @@ void polishSplitParts(std::vector<PartDetection>& parts, const std::vector<std::
   }
 }
 
+/// A refused pose lies clear of every part in `kept`: its centre farther from theirs than a
+/// quarter of the two sizes (a wrong pose of a found part's points, or the same part found from
+/// another piece, is not).
+bool clearOfFound(const PartDetection& d, const std::vector<PartDetection>& kept,
+                  const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx, const std::vector<std::string>& models) {
+  const ModelMatcher::ModelIndex& m = indexOf(idx, models, d.model);
+  const Eigen::Vector3d c = d.pose * m.centroid;
+  for (const auto& k : kept) {
+    const ModelMatcher::ModelIndex& o = indexOf(idx, models, k.model);
+    if ((k.pose * o.centroid - c).norm() < 0.25 * (m.diameter + o.diameter)) return false;
+  }
+  return true;
+}
+
+/// A cluster's finite points, thinned to max_cluster_points as locate() thins them.
+std::vector<Vec3> clusterPoints(const ScanCloud& cluster, const MatchingConfig& cfg) {
+  std::vector<Vec3> points;
+  for (const auto& p : cluster.points)
+    if (p.allFinite()) points.push_back(p);
+  const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
+  if (points.size() > cap) points = capPoints(points, cfg.icp_spacing, cap);
+  return points;
+}
+
 /// A second look at refused poses: per cluster, the best pose refused for unseen surface alone
 /// that lies clear of every part found is tested again with those parts as occluders, and
 /// accepted if it passes then.
@@ -607,17 +631,7 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
                       const SupportSeen& seen, const LightSweep* light, const MatchingConfig& cfg, MatchStats& st) {
   std::vector<std::pair<const ModelMatcher::ModelIndex*, Eigen::Isometry3f>> found;
   for (const auto& k : kept) found.emplace_back(&indexOf(idx, models, k.model), k.pose.cast<float>().inverse());
-  // clear of every part found: its centre farther from theirs than a quarter of the two sizes
-  // (a wrong pose of a found part's points, or the same part found from another piece, is not)
-  auto clear = [&](const PartDetection& d) {
-    const ModelMatcher::ModelIndex& m = indexOf(idx, models, d.model);
-    const Eigen::Vector3d c = d.pose * m.centroid;
-    for (size_t k = 0; k < kept.size(); ++k) {
-      const ModelMatcher::ModelIndex& o = indexOf(idx, models, kept[k].model);
-      if ((kept[k].pose * o.centroid - c).norm() < 0.25 * (m.diameter + o.diameter)) return false;
-    }
-    return true;
-  };
+  auto clear = [&](const PartDetection& d) { return clearOfFound(d, kept, idx, models); };
   // per cluster, its best refused pose that passes every test but the unseen one
   std::map<int, size_t> look;
   for (size_t i = 0; i < st.rejected.size(); ++i) {
@@ -634,11 +648,7 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
     const PartDetection& d = st.rejected[i];
     const ModelMatcher::ModelIndex& m = indexOf(idx, models, d.model);
     if (!clear(d)) continue;  // a part this second look accepted lies there
-    std::vector<Vec3> points;
-    for (const auto& p : clusters[cluster].points)
-      if (p.allFinite()) points.push_back(p);
-    const size_t cap = static_cast<size_t>(std::max(1000.0, cfg.max_cluster_points));
-    if (points.size() > cap) points = capPoints(points, cfg.icp_spacing, cap);
+    const std::vector<Vec3> points = clusterPoints(clusters[cluster], cfg);
     if (points.size() < 3) continue;
     const std::unique_ptr<SceneData> sd = prepareScene(points, cfg);
     if (whole.size() > 0) sd->whole = &whole;
@@ -657,6 +667,84 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
   std::sort(accepted_now.rbegin(), accepted_now.rend());
   for (size_t i : accepted_now) st.rejected.erase(st.rejected.begin() + static_cast<long>(i));
   st.unseen_second_look += accepted_now.size();
+}
+
+/// A second look at refused pieces of split parts: a part that clustering split between a large
+/// piece and a small one may get no acceptable pose from either alone (the large piece's voting
+/// goes astray; the small piece's pose, near the truth, is millimetres off, for it holds too
+/// little of the part to pin it). Per cluster, the best refused pose clear of every part found
+/// whose model at that pose lies near at least kSplitMinPoints points of other clusters or
+/// fragments (none nearer a found part) is polished on every scan point within refine_radius of
+/// its model that no found part lies nearer, up to kSplitRounds times while a round explains more
+/// of the model's visible surface and moves it by kSplitSettled or more, and accepted if it
+/// passes every test then, its coverage measured on its own cluster. Tried best score first; a
+/// pose accepted here makes the others near it not clear.
+void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                     const std::vector<std::string>& models, const std::vector<ScanCloud>& clusters,
+                     const std::vector<Vec3>& scan, const std::vector<int>& scan_cluster, const PointGrid& whole,
+                     const SupportSeen& seen, const LightSweep* light, const Eigen::Vector4f* support_plane,
+                     const MatchingConfig& cfg, MatchStats& st) {
+  auto clear = [&](const PartDetection& d) { return clearOfFound(d, kept, idx, models); };
+  std::vector<const ModelMatcher::ModelIndex*> mi;
+  for (const auto& k : kept) mi.push_back(&indexOf(idx, models, k.model));
+  const FoundParts found(kept, mi, static_cast<float>(cfg.refine_radius));
+  // the scan points within the radius of d's model, none nearer a found part; *foreign: how many
+  // lie outside d's cluster
+  auto near = [&](const PartDetection& d, const ModelMatcher::ModelIndex& m, size_t* foreign) {
+    const FoundParts here({d}, {&m}, found.radius);
+    std::vector<Vec3> pts;
+    *foreign = 0;
+    for (size_t k = 0; k < scan.size(); ++k) {
+      const float dist = here.distance(0, scan[k]);
+      if (!std::isfinite(dist) || found.owner(scan[k]) >= 0) continue;
+      pts.push_back(scan[k]);
+      *foreign += scan_cluster[k] != d.cluster;
+    }
+    return pts;
+  };
+  std::map<int, size_t> look;  // per cluster, its best refused pose with foreign points near it
+  for (size_t i = 0; i < st.rejected.size(); ++i) {
+    const PartDetection& d = st.rejected[i];
+    if (d.cluster < 0 || static_cast<size_t>(d.cluster) >= clusters.size() || !(d.fitness > 0) || !clear(d)) continue;
+    const auto it = look.find(d.cluster);
+    if (it != look.end() && d.score <= st.rejected[it->second].score) continue;
+    size_t foreign = 0;
+    near(d, indexOf(idx, models, d.model), &foreign);
+    if (foreign >= kSplitMinPoints) look[d.cluster] = i;
+  }
+  std::vector<size_t> order;
+  for (const auto& [cluster, i] : look) order.push_back(i);
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return st.rejected[a].score > st.rejected[b].score; });
+  std::vector<size_t> accepted_now;
+  for (size_t i : order) {
+    const PartDetection& d = st.rejected[i];
+    if (!clear(d)) continue;  // a part this second look accepted lies there
+    const ModelMatcher::ModelIndex& m = indexOf(idx, models, d.model);
+    const std::vector<Vec3> own = clusterPoints(clusters[static_cast<size_t>(d.cluster)], cfg);
+    if (own.size() < 3) continue;
+    const std::unique_ptr<SceneData> cluster_scene = prepareScene(own, cfg);
+    PartDetection cur = d;
+    for (int round = 0; round < kSplitRounds; ++round) {
+      size_t foreign = 0;
+      std::vector<Vec3> pts = near(cur, m, &foreign);
+      PartDetection r;
+      if (pts.size() < 3 || !polishOn(std::move(pts), m, cfg, support_plane, cur, cur.pose.cast<float>(), &whole, &seen, light, &r) ||
+          r.fitness <= cur.fitness)
+        break;
+      r.coverage = coverage(*cluster_scene, m, r.pose.cast<float>(), cfg.fitness_radius);
+      r.score = r.fitness * (cfg.min_coverage > 0 ? r.coverage : 1.0);
+      const double step = modelMove(m, cur.pose, r.pose);
+      cur = r;
+      if (step < kSplitSettled) break;
+    }
+    if (!accepted(cur, cfg) || !clear(cur)) continue;
+    cur.pose = canonicalPose(m.info, m.centroid, cur.pose);
+    kept.push_back(cur);
+    accepted_now.push_back(i);
+  }
+  std::sort(accepted_now.rbegin(), accepted_now.rend());
+  for (size_t i : accepted_now) st.rejected.erase(st.rejected.begin() + static_cast<long>(i));
+  st.split_second_look += accepted_now.size();
 }
 
 }  // namespace
@@ -885,6 +973,11 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     const auto t_split = Clock::now();
     polishSplitParts(kept, idx, models, scan, scan_cluster, whole, seen, light, support_plane, cfg, st);
     st.refine_seconds += seconds(t_split);
+  }
+  if (cfg.split_second_look && whole.size() > 0) {
+    const auto t_look = Clock::now();
+    splitSecondLook(kept, idx, models, clusters, scan, scan_cluster, whole, seen, light, support_plane, cfg, st);
+    st.refine_seconds += seconds(t_look);
   }
   if (cfg.unseen_second_look && light && cfg.check_illumination && cfg.check_visibility && !light->empty() && cfg.max_unseen < 1 &&
       !kept.empty()) {

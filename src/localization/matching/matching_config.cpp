@@ -118,6 +118,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.polish_split_parts = m.getBool("polish_split_parts", c.polish_split_parts);
   c.turned_poses = m.getBool("turned_poses", c.turned_poses);
   c.unseen_second_look = m.getBool("unseen_second_look", c.unseen_second_look);
+  c.split_second_look = m.getBool("split_second_look", c.split_second_look);
   c.turned_rmse_ratio = m.getDouble("turned_rmse_ratio", c.turned_rmse_ratio);
   if (!(c.turned_rmse_ratio > 0 && c.turned_rmse_ratio <= 1)) m.fail("turned_rmse_ratio", "must be in (0, 1]");
   positive("icp_slack_range", c.icp_slack_range);
