@@ -31,26 +31,41 @@ SurfaceDistance::SurfaceDistance(const Scene& scene) : table_(scene.table) {
   }
 }
 
-double SurfaceDistance::operator()(const Eigen::Vector3d& p) const {
+double SurfaceDistance::operator()(const Eigen::Vector3d& p) const { return nearest(p, nullptr); }
+
+double SurfaceDistance::nearest(const Eigen::Vector3d& p, int* object) const {
   double best = std::numeric_limits<double>::infinity();
+  int which = -1;
   const Eigen::Vector2d rel = p.head<2>() - table_.center;
   if (std::abs(rel.x()) <= table_.size.x() / 2 && std::abs(rel.y()) <= table_.size.y() / 2) {
     best = std::abs(p.z() - table_.z);
   }
-  for (const auto& o : objects_) {
+  for (size_t k = 0; k < objects_.size(); ++k) {
+    const Object& o = objects_[k];
     if (o.box.exteriorDistance(p) >= best) continue;
     for (size_t i = 0; i < o.a.size(); ++i) {
-      best = std::min(best, pointTriangleDistance(p, o.a[i], o.b[i], o.c[i]));
+      const double d = pointTriangleDistance(p, o.a[i], o.b[i], o.c[i]);
+      if (d < best) {
+        best = d;
+        which = static_cast<int>(k);
+      }
     }
   }
+  if (object) *object = which;
   return best;
 }
 
-SurfaceErrorStats SurfaceDistance::stats(const std::vector<Eigen::Vector3d>& points) const {
+SurfaceErrorStats SurfaceDistance::stats(const std::vector<Eigen::Vector3d>& points, std::vector<int>* on_object,
+                                         double radius) const {
   SurfaceErrorStats s;
   std::vector<double> errs;
   errs.reserve(points.size());
-  for (const auto& p : points) errs.push_back((*this)(p));
+  if (on_object) on_object->assign(points.size(), -1);
+  for (size_t i = 0; i < points.size(); ++i) {
+    int k = -1;
+    errs.push_back(nearest(points[i], &k));
+    if (on_object && errs.back() <= radius) (*on_object)[i] = k;
+  }
   s.points = errs.size();
   if (errs.empty()) return s;
   double s2 = 0, s1 = 0;

@@ -373,11 +373,54 @@ int runDemo(const Options& o) {
   return counts.fn == 0 && counts.fp == 0 ? 0 : 3;
 }
 
+/// What the scan measured of each part (evaluation only: from the truth). Each part gets
+/// `scan_points`, the scan points on its true surface (`on_object`: per point, the scene object
+/// it lies on within kOnSurface, SurfaceDistance::stats). A false detection of a part's model
+/// whose nearest object is that part, missed, gets `part_points_on_it`: the share of the part's
+/// scan points that lie within kOnSurface of the detected pose's surface too (1: the points
+/// cannot tell the two poses apart; only where nothing was measured can).
+constexpr double kOnSurface = 0.001;  // m
+constexpr double kFitsBoth = 0.99;    // part_points_on_it from which the scan cannot tell the poses apart
+void describeScanPoints(const Scene& scene, const ModelLibrary& lib, const ScanCloud& cloud, const std::vector<int>& on_object,
+                        const std::vector<ScoredDetection>& dets, json* sj) {
+  std::vector<std::vector<Eigen::Vector3d>> on(scene.objects.size());
+  for (size_t i = 0; i < cloud.size() && i < on_object.size(); ++i)
+    if (on_object[i] >= 0 && static_cast<size_t>(on_object[i]) < on.size())
+      on[static_cast<size_t>(on_object[i])].push_back(cloud.points[i].cast<double>());
+  auto& parts = (*sj)["parts"];
+  for (size_t k = 0; k < scene.objects.size() && k < parts.size(); ++k) parts[k]["scan_points"] = on[k].size();
+  for (auto& f : (*sj)["false_detections"]) {
+    const std::string near = f.value("nearest_object", std::string());
+    for (size_t k = 0; k < scene.objects.size() && k < parts.size(); ++k) {
+      const SceneObject& o = scene.objects[k];
+      if (o.name != near || o.model != f["model"].get<std::string>() || parts[k]["found"].get<bool>() || on[k].empty()) continue;
+      // the detection this entry describes: the one of its model at its place
+      const auto& xyz = f["pose"]["xyz"];
+      const Eigen::Vector3d at(xyz[0].get<double>(), xyz[1].get<double>(), xyz[2].get<double>());
+      const TriangleMesh& mesh = lib.model(o.model).mesh;
+      for (const auto& d : dets) {
+        if (d.model != o.model || (d.pose.translation() - at).norm() > 1e-9) continue;
+        size_t both = 0;
+        for (const auto& p : on[k]) {
+          const Eigen::Vector3d q = d.pose.inverse() * p;
+          double best = std::numeric_limits<double>::infinity();
+          for (const auto& t : mesh.faces)
+            best = std::min(best, pointTriangleDistance(q, mesh.vertices[t[0]].cast<double>(), mesh.vertices[t[1]].cast<double>(),
+                                                        mesh.vertices[t[2]].cast<double>()));
+          both += best <= kOnSurface;
+        }
+        f["part_points_on_it"] = static_cast<double>(both) / static_cast<double>(on[k].size());
+        break;
+      }
+    }
+  }
+}
+
 /// A finished scan (cropped and filtered as the nodes do) clustered and located as the nodes do,
 /// scored against the scene's truth.
 json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibrary& lib, ModelMatcher& matcher,
                     const ClusteringConfig& ccfg, const Options& o, DetectionCounts* counts, std::vector<double>* terr,
-                    std::vector<double>* rerr, const LightSweep* light = nullptr) {
+                    std::vector<double>* rerr, const LightSweep* light = nullptr, const std::vector<int>* on_object = nullptr) {
   const ClusteringResult cr = clusterScene(cloud, ccfg);
   std::vector<ScanCloud> clusters;
   for (const auto& c : cr.clusters) clusters.push_back(c.cloud);
@@ -448,6 +491,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
                               {"unseen", r.unseen},
                               {"right", t_err <= o.max_t_mm * 1e-3 && r_err <= o.max_r_deg * kDeg}});
   }
+  if (on_object) describeScanPoints(scene, lib, cloud, *on_object, dets, &sj);
   sj["cluster_sizes"] = json::array();
   for (const auto& c : clusters) sj["cluster_sizes"].push_back(c.size());
   sj["points"] = cloud.size();
@@ -498,6 +542,7 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
               {"trajectory", o.trajectory},
               {"success", {{"max_t_mm", o.max_t_mm}, {"max_r_deg", o.max_r_deg}}},
               {"seeds", json::array()}};
+  int unmeasured = 0, fits_both = 0;  // misses with no scan point on the part; whose points a false pose fits
   for (const uint64_t seed : seeds) {
     const GeneratedScene g = generateScene(base, models, seed, {}, out_dir);
     const ScannerRenderer renderer(std::make_shared<CellGeometry>(g.scene));
@@ -514,18 +559,28 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
     // the light sheet frame by frame, as the scanner knows it: the poses the robot reported and
     // the calibrated flange → laser transform
     const LightSweep light = LightSweep::fromFlangePoses(sweep.poses, cal.T_flange_laser, settings.laser_fan_angle / 2);
-    json sj = locateAndScore(g.scene, cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1, &light);
-    sj["seed"] = seed;
-    sj["scene"] = g.file;
     std::vector<Eigen::Vector3d> pts;
     for (const auto& p : cloud.points) pts.push_back(p.cast<double>());
-    const SurfaceErrorStats se = SurfaceDistance(g.scene).stats(pts);
+    std::vector<int> on_object;  // the object each scan point lies on (the truth: for scoring only)
+    const SurfaceErrorStats se = SurfaceDistance(g.scene).stats(pts, &on_object, kOnSurface);
+    json sj = locateAndScore(g.scene, cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1, &light, &on_object);
+    sj["seed"] = seed;
+    sj["scene"] = g.file;
     sj["surface_error_rms_mm"] = se.rms * 1e3;
     rms.push_back(se.rms * 1e3);
     out["seeds"].push_back(sj);
     total.tp += counts.tp;
     total.fp += counts.fp;
     total.fn += counts.fn;
+    for (const auto& p : sj["parts"]) {
+      if (p["found"].get<bool>() || p.value("distractor", false)) continue;
+      if (p.value("scan_points", 0) == 0) ++unmeasured;
+      for (const auto& f : sj["false_detections"])
+        if (f.value("nearest_object", std::string()) == p["name"].get<std::string>() && f.value("part_points_on_it", 0.0) >= kFitsBoth) {
+          ++fits_both;
+          break;
+        }
+    }
     terr.insert(terr.end(), t1.begin(), t1.end());
     rerr.insert(rerr.end(), r1.begin(), r1.end());
     std::printf("seed %llu: %d found, %d missed, %d false (%zu objects, %zu distractors), median %.3f mm %.3f deg\n",
@@ -536,6 +591,10 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   out["tp"] = total.tp;
   out["fp"] = total.fp;
   out["fn"] = total.fn;
+  // the misses no method could avoid from this scan: parts it holds no point of, and parts whose
+  // points a false detection of their model fits as well (describeScanPoints)
+  out["fn_no_scan_point"] = unmeasured;
+  out["fn_points_fit_a_false_pose"] = fits_both;
   out["precision"] = total.precision();
   out["recall"] = total.recall();
   out["f1"] = total.f1();
@@ -556,6 +615,9 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
     failed.push_back("recall " + std::to_string(total.recall()) + " < " + std::to_string(o.limit_recall));
   out["limits_failed"] = failed;
   writeJson(o.json, out);
+  std::printf("cells: %d found, %d missed (%d with no scan point on the part, %d whose scan points a false pose of its model "
+              "fits as well), %d false\n",
+              total.tp, total.fn, unmeasured, fits_both, total.fp);
   std::printf("cells: %zu seeds, P %.3f R %.3f F1 %.3f, median %.3f mm %.3f deg, surface RMS median %.4f mm max %.4f mm\n",
               seeds.size(), total.precision(), total.recall(), total.f1(), median(terr), median(rerr), median(rms),
               out["surface_error_rms_mm_max"].get<double>());

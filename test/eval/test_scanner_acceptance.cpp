@@ -7,6 +7,7 @@
 #include "cellsight/localization/model_matching.hpp"
 #include "cellsight/eval/evaluation.hpp"
 #include "cellsight/eval/sim_scan.hpp"
+#include "cellsight/common/mesh.hpp"
 #include "cellsight/common/trajectory.hpp"
 
 using namespace cellsight;
@@ -52,6 +53,50 @@ TEST(ScannerAcceptance, NoiseFreeScanLiesOnTheTrueSurfaces) {
               e.p99 * 1e3, e.points);
   EXPECT_GT(e.points, 100000u);
   EXPECT_LT(e.rms, 0.02e-3);
+}
+
+// The evaluation's attribution of scan points to the parts they lie on (the misses a scan holds
+// no point of): a point on a part's surface is that part's, one on the table or in free space
+// is no part's, and the noise-free demo scan measures every part of the demo cell.
+TEST(ScannerAcceptance, ScanPointsAreAttributedToThePartsTheyLieOn) {
+  Scene s = loadScene(kRoot + "/config/scenes/demo.yaml");
+  const SurfaceDistance truth(s);
+  ASSERT_GE(s.objects.size(), 2u);
+  const SceneObject& o = s.objects[1];
+  const TriangleMesh mesh = loadValidMesh(o.info.mesh_file);
+  Eigen::Vector3d on_part(0, 0, -1);  // the centre of its highest face (not the one on the table)
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector3d c =
+        o.T_base_object * ((mesh.vertices[f[0]] + mesh.vertices[f[1]] + mesh.vertices[f[2]]).cast<double>() / 3.0);
+    if (c.z() > on_part.z()) on_part = c;
+  }
+  const Eigen::Vector3d on_table(s.table.center.x() + 0.3, s.table.center.y() + 0.3, s.table.z);
+  const Eigen::Vector3d in_air = on_table + Eigen::Vector3d(0, 0, 0.005);
+  std::vector<int> on;
+  const SurfaceErrorStats e = truth.stats({on_part, on_table, in_air}, &on, 0.001);
+  ASSERT_EQ(on.size(), 3u);
+  EXPECT_EQ(on[0], 1);
+  EXPECT_EQ(on[1], -1);
+  EXPECT_EQ(on[2], -1);
+  EXPECT_NEAR(e.max, 0.005, 1e-9);
+  int k = 7;
+  EXPECT_NEAR(truth.nearest(in_air, &k), 0.005, 1e-9);
+  EXPECT_EQ(k, -1);
+
+  s.noise.enabled = false;
+  ScannerRenderer r(std::make_shared<CellGeometry>(s));
+  const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
+  const ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(s), {}, {}, 1);
+  std::vector<Eigen::Vector3d> pts;
+  for (const auto& p : cloud.points) pts.push_back(p.cast<double>());
+  SurfaceDistance(s).stats(pts, &on, 0.001);
+  std::vector<size_t> per(s.objects.size(), 0);
+  for (int i : on)
+    if (i >= 0) ++per[static_cast<size_t>(i)];
+  for (size_t i = 0; i < per.size(); ++i) {
+    std::printf("%s: %zu scan points\n", s.objects[i].name.c_str(), per[i]);
+    EXPECT_GT(per[i], 500u) << s.objects[i].name;
+  }
 }
 
 TEST(ScannerAcceptance, ReferenceSphereProbingAndMultiOrientationErrors) {

@@ -22,7 +22,14 @@ class SurfaceDistance {
  public:
   explicit SurfaceDistance(const Scene& scene);
   double operator()(const Eigen::Vector3d& p) const;
-  SurfaceErrorStats stats(const std::vector<Eigen::Vector3d>& points) const;
+  /// The distance to the nearest surface, and in *object the index of the scene object whose
+  /// surface it is (-1: the table, or nothing within reach).
+  double nearest(const Eigen::Vector3d& p, int* object) const;
+  /// Distance statistics of `points`; with `on_object`, also the scene objects each point lies
+  /// on: the index of the nearest surface's object where it is within `radius` (-1: the table,
+  /// or farther from every surface), one per point.
+  SurfaceErrorStats stats(const std::vector<Eigen::Vector3d>& points, std::vector<int>* on_object = nullptr,
+                          double radius = 0.001) const;
 
  private:
   struct Object {
