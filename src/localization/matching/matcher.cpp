@@ -620,6 +620,25 @@ std::vector<Vec3> clusterPoints(const ScanCloud& cluster, const MatchingConfig& 
   return points;
 }
 
+/// Refused poses a second look accepts: each goes, in canonical form, into `kept` at once (the
+/// looks after it must lie clear of it) and out of MatchStats::rejected when the look ends.
+struct SecondLook {
+  std::vector<PartDetection>& kept;
+  MatchStats& st;
+  std::vector<size_t> taken;  // indices into st.rejected
+  void take(size_t i, PartDetection d, const ModelMatcher::ModelIndex& m) {
+    d.pose = canonicalPose(m.info, m.centroid, d.pose);
+    kept.push_back(d);
+    taken.push_back(i);
+  }
+  /// removes the taken poses from st.rejected; how many were taken
+  size_t finish() {
+    std::sort(taken.rbegin(), taken.rend());
+    for (size_t i : taken) st.rejected.erase(st.rejected.begin() + static_cast<long>(i));
+    return taken.size();
+  }
+};
+
 /// A second look at refused poses: per cluster, the best pose refused for unseen surface alone
 /// that lies clear of every part found is tested again with those parts as occluders, and
 /// accepted if it passes then.
@@ -633,18 +652,18 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
   for (const auto& k : kept) found.emplace_back(&indexOf(idx, models, k.model), k.pose.cast<float>().inverse());
   auto clear = [&](const PartDetection& d) { return clearOfFound(d, kept, idx, models); };
   // per cluster, its best refused pose that passes every test but the unseen one
-  std::map<int, size_t> look;
+  std::map<int, size_t> best;
   for (size_t i = 0; i < st.rejected.size(); ++i) {
     const PartDetection& d = st.rejected[i];
     if (d.cluster < 0 || static_cast<size_t>(d.cluster) >= clusters.size()) continue;
     PartDetection seen_all = d;
     seen_all.unseen = 0;
     if (d.unseen <= cfg.max_unseen || !accepted(seen_all, cfg) || !clear(d)) continue;
-    const auto it = look.find(d.cluster);
-    if (it == look.end() || d.score > st.rejected[it->second].score) look[d.cluster] = i;
+    const auto it = best.find(d.cluster);
+    if (it == best.end() || d.score > st.rejected[it->second].score) best[d.cluster] = i;
   }
-  std::vector<size_t> accepted_now;
-  for (const auto& [cluster, i] : look) {
+  SecondLook look{kept, st, {}};
+  for (const auto& [cluster, i] : best) {
     const PartDetection& d = st.rejected[i];
     const ModelMatcher::ModelIndex& m = indexOf(idx, models, d.model);
     if (!clear(d)) continue;  // a part this second look accepted lies there
@@ -660,13 +679,9 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
     if (unseen > cfg.max_unseen) continue;
     PartDetection a = d;
     a.unseen = unseen;
-    a.pose = canonicalPose(m.info, m.centroid, a.pose);
-    kept.push_back(a);
-    accepted_now.push_back(i);
+    look.take(i, a, m);
   }
-  std::sort(accepted_now.rbegin(), accepted_now.rend());
-  for (size_t i : accepted_now) st.rejected.erase(st.rejected.begin() + static_cast<long>(i));
-  st.unseen_second_look += accepted_now.size();
+  st.unseen_second_look += look.finish();
 }
 
 /// A second look at refused pieces of split parts: a part that clustering split between a large
@@ -702,20 +717,20 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
     }
     return pts;
   };
-  std::map<int, size_t> look;  // per cluster, its best refused pose with foreign points near it
+  std::map<int, size_t> best;  // per cluster, its best refused pose with foreign points near it
   for (size_t i = 0; i < st.rejected.size(); ++i) {
     const PartDetection& d = st.rejected[i];
     if (d.cluster < 0 || static_cast<size_t>(d.cluster) >= clusters.size() || !(d.fitness > 0) || !clear(d)) continue;
-    const auto it = look.find(d.cluster);
-    if (it != look.end() && d.score <= st.rejected[it->second].score) continue;
+    const auto it = best.find(d.cluster);
+    if (it != best.end() && d.score <= st.rejected[it->second].score) continue;
     size_t foreign = 0;
     near(d, indexOf(idx, models, d.model), &foreign);
-    if (foreign >= kSplitMinPoints) look[d.cluster] = i;
+    if (foreign >= kSplitMinPoints) best[d.cluster] = i;
   }
   std::vector<size_t> order;
-  for (const auto& [cluster, i] : look) order.push_back(i);
+  for (const auto& [cluster, i] : best) order.push_back(i);
   std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return st.rejected[a].score > st.rejected[b].score; });
-  std::vector<size_t> accepted_now;
+  SecondLook look{kept, st, {}};
   for (size_t i : order) {
     const PartDetection& d = st.rejected[i];
     if (!clear(d)) continue;  // a part this second look accepted lies there
@@ -737,14 +752,9 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
       cur = r;
       if (step < kSplitSettled) break;
     }
-    if (!accepted(cur, cfg) || !clear(cur)) continue;
-    cur.pose = canonicalPose(m.info, m.centroid, cur.pose);
-    kept.push_back(cur);
-    accepted_now.push_back(i);
+    if (accepted(cur, cfg) && clear(cur)) look.take(i, cur, m);
   }
-  std::sort(accepted_now.rbegin(), accepted_now.rend());
-  for (size_t i : accepted_now) st.rejected.erase(st.rejected.begin() + static_cast<long>(i));
-  st.split_second_look += accepted_now.size();
+  st.split_second_look += look.finish();
 }
 
 }  // namespace
