@@ -687,7 +687,8 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
 /// A second look at refused pieces of split parts: a part that clustering split between a large
 /// piece and a small one may get no acceptable pose from either alone (the large piece's voting
 /// goes astray; the small piece's pose, near the truth, is millimetres off, for it holds too
-/// little of the part to pin it). Per cluster, the best refused pose clear of every part found
+/// little of the part to pin it). Per cluster, the best refused pose that explains the cluster
+/// (min_coverage) and half the fitness asked (min_fitness / 2), clear of every part found,
 /// whose model at that pose lies near at least kSplitMinPoints points of other clusters or
 /// fragments (none nearer a found part) is polished on every scan point within refine_radius of
 /// its model that no found part lies nearer, up to kSplitRounds times while a round explains more
@@ -720,7 +721,10 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
   std::map<int, size_t> best;  // per cluster, its best refused pose with foreign points near it
   for (size_t i = 0; i < st.rejected.size(); ++i) {
     const PartDetection& d = st.rejected[i];
-    if (d.cluster < 0 || static_cast<size_t>(d.cluster) >= clusters.size() || !(d.fitness > 0) || !clear(d)) continue;
+    // a piece of a part: the pose explains its own cluster and half the visible surface F asks
+    if (d.cluster < 0 || static_cast<size_t>(d.cluster) >= clusters.size() || d.coverage < cfg.min_coverage ||
+        d.fitness < 0.5 * cfg.min_fitness || !clear(d))
+      continue;
     const auto it = best.find(d.cluster);
     if (it != best.end() && d.score <= st.rejected[it->second].score) continue;
     size_t foreign = 0;
