@@ -319,7 +319,8 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
     const Eigen::Vector3d at = dets[i].pose * centroids.centroid(dets[i].model);
     json f = {{"model", dets[i].model},       {"fitness", dets[i].fitness}, {"coverage", dets[i].coverage},
               {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through}, {"unseen", dets[i].unseen},
-              {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)}};
+              {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)},
+              {"detection", i}};
     double nearest = 1e9;
     for (const auto& o : scene.objects) {
       const Eigen::Vector3d c = lib.has(o.model) ? Eigen::Vector3d(o.T_base_object * centroids.centroid(o.model))
@@ -394,24 +395,18 @@ void describeScanPoints(const Scene& scene, const ModelLibrary& lib, const ScanC
     for (size_t k = 0; k < scene.objects.size() && k < parts.size(); ++k) {
       const SceneObject& o = scene.objects[k];
       if (o.name != near || o.model != f["model"].get<std::string>() || parts[k]["found"].get<bool>() || on[k].empty()) continue;
-      // the detection this entry describes: the one of its model at its place
-      const auto& xyz = f["pose"]["xyz"];
-      const Eigen::Vector3d at(xyz[0].get<double>(), xyz[1].get<double>(), xyz[2].get<double>());
+      const ScoredDetection& d = dets.at(f["detection"].get<size_t>());
       const TriangleMesh& mesh = lib.model(o.model).mesh;
-      for (const auto& d : dets) {
-        if (d.model != o.model || (d.pose.translation() - at).norm() > 1e-9) continue;
-        size_t both = 0;
-        for (const auto& p : on[k]) {
-          const Eigen::Vector3d q = d.pose.inverse() * p;
-          double best = std::numeric_limits<double>::infinity();
-          for (const auto& t : mesh.faces)
-            best = std::min(best, pointTriangleDistance(q, mesh.vertices[t[0]].cast<double>(), mesh.vertices[t[1]].cast<double>(),
-                                                        mesh.vertices[t[2]].cast<double>()));
-          both += best <= kOnSurface;
-        }
-        f["part_points_on_it"] = static_cast<double>(both) / static_cast<double>(on[k].size());
-        break;
+      size_t both = 0;
+      for (const auto& p : on[k]) {
+        const Eigen::Vector3d q = d.pose.inverse() * p;
+        double best = std::numeric_limits<double>::infinity();
+        for (const auto& t : mesh.faces)
+          best = std::min(best, pointTriangleDistance(q, mesh.vertices[t[0]].cast<double>(), mesh.vertices[t[1]].cast<double>(),
+                                                      mesh.vertices[t[2]].cast<double>()));
+        both += best <= kOnSurface;
       }
+      f["part_points_on_it"] = static_cast<double>(both) / static_cast<double>(on[k].size());
     }
   }
 }
@@ -591,8 +586,8 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   out["tp"] = total.tp;
   out["fp"] = total.fp;
   out["fn"] = total.fn;
-  // the misses no method could avoid from this scan: parts it holds no point of, and parts whose
-  // points a false detection of their model fits as well (describeScanPoints)
+  // the misses the scan's points cannot decide: parts it holds no point of, and parts whose points
+  // a false detection of their model fits as well (describeScanPoints)
   out["fn_no_scan_point"] = unmeasured;
   out["fn_points_fit_a_false_pose"] = fits_both;
   out["precision"] = total.precision();

@@ -418,12 +418,12 @@ TEST(ModelMatching, ARefusedPieceOfASplitPartIsPolishedOnTheOtherPiece) {
   c.viewpoint = kEye;
   const Eigen::Vector4f table(0, 0, 1, 0);
   const std::vector<Eigen::Vector3f> plate(cell.clusters[0].points.begin(), cell.clusters[0].points.end());
+  const ModelInfo& info = library()->model("bracket").info;
+  const Eigen::Vector3d centroid = ModelMatcher(library(), c).centroid("bracket");
   auto run = [&](bool look, MatchStats* st) {
     c.split_second_look = look;
-    ModelMatcher m(library(), c);
-    const auto found = m.locate({cell.clusters[1]}, {"bracket"}, st, nullptr, &table, nullptr, &cell.sweep, &plate);
-    return found.size() != 1 ? PoseError{1e9, 1e9}
-                             : poseError(library()->model("bracket").info, m.centroid("bracket"), found[0].pose, truth);
+    const auto found = ModelMatcher(library(), c).locate({cell.clusters[1]}, {"bracket"}, st, nullptr, &table, nullptr, &cell.sweep, &plate);
+    return found.size() != 1 ? PoseError{1e9, 1e9} : poseError(info, centroid, found[0].pose, truth);
   };
   MatchStats once, twice;
   const PoseError first = run(false, &once), second = run(true, &twice);
@@ -432,8 +432,7 @@ TEST(ModelMatching, ARefusedPieceOfASplitPartIsPolishedOnTheOtherPiece) {
               second.translation * 1e3, second.rotation * 180 / M_PI);
   EXPECT_GT(first.translation, 1.0) << "found without it now: the test no longer shows what the second look adds";
   ASSERT_FALSE(once.rejected.empty());
-  EXPECT_LT(poseError(library()->model("bracket").info, ModelMatcher(library(), c).centroid("bracket"), once.rejected[0].pose, truth).translation, 5e-3)
-      << "the refused pose is not near the truth";
+  EXPECT_LT(poseError(info, centroid, once.rejected[0].pose, truth).translation, 5e-3) << "the refused pose is not near the truth";
   EXPECT_EQ(once.split_second_look, 0u);
   EXPECT_EQ(twice.split_second_look, 1u);
   EXPECT_LT(second.translation, 0.5e-3);

@@ -177,10 +177,11 @@ struct MatchingConfig {
   /// the parts found, is tested again with their models stopping rays and beams too (a part whose
   /// side towards it was not measured still shades it), and accepted if it passes then.
   bool unseen_second_look = true;
-  /// Once every part is found, each cluster's best refused pose clear of them, whose model lies
-  /// near points of other clusters or fragments (a part that clustering split, its small piece
-  /// matched millimetres off), is polished on the scan points near its model and accepted if it
-  /// passes every test then (docs/localization.md, "Split parts"). Needs fitness_whole_scan.
+  /// Once every part is found, each cluster's best refused pose that explains its cluster
+  /// (min_coverage) and half of min_fitness, clear of them, whose model lies near points of other
+  /// clusters or fragments (a part that clustering split, its small piece matched millimetres
+  /// off), is polished on the scan points near its model and accepted if it passes every test
+  /// then (docs/localization.md, "Refused pieces of split parts"). Needs fitness_whole_scan.
   bool split_second_look = true;
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();  ///< scene frame (the scanner camera)
   double max_view_angle = 1.40;    ///< rad between normal and view ray for "visible"

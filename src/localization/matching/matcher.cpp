@@ -718,7 +718,8 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
     }
     return pts;
   };
-  std::map<int, size_t> best;  // per cluster, its best refused pose with foreign points near it
+  // per cluster, its best refused pose with foreign points near it, and the scan points near it
+  std::map<int, std::pair<size_t, std::vector<Vec3>>> best;
   for (size_t i = 0; i < st.rejected.size(); ++i) {
     const PartDetection& d = st.rejected[i];
     // a piece of a part: the pose explains its own cluster and half the visible surface F asks
@@ -726,16 +727,17 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
         d.fitness < 0.5 * cfg.min_fitness || !clear(d))
       continue;
     const auto it = best.find(d.cluster);
-    if (it != best.end() && d.score <= st.rejected[it->second].score) continue;
+    if (it != best.end() && d.score <= st.rejected[it->second.first].score) continue;
     size_t foreign = 0;
-    near(d, indexOf(idx, models, d.model), &foreign);
-    if (foreign >= kSplitMinPoints) best[d.cluster] = i;
+    std::vector<Vec3> pts = near(d, indexOf(idx, models, d.model), &foreign);
+    if (foreign >= kSplitMinPoints) best[d.cluster] = {i, std::move(pts)};
   }
-  std::vector<size_t> order;
-  for (const auto& [cluster, i] : best) order.push_back(i);
-  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return st.rejected[a].score > st.rejected[b].score; });
+  std::vector<std::pair<size_t, std::vector<Vec3>>*> order;
+  for (auto& [cluster, b] : best) order.push_back(&b);
+  std::sort(order.begin(), order.end(), [&](const auto* a, const auto* b) { return st.rejected[a->first].score > st.rejected[b->first].score; });
   SecondLook look{kept, st, {}};
-  for (size_t i : order) {
+  for (auto* b : order) {
+    const size_t i = b->first;
     const PartDetection& d = st.rejected[i];
     if (!clear(d)) continue;  // a part this second look accepted lies there
     const ModelMatcher::ModelIndex& m = indexOf(idx, models, d.model);
@@ -745,7 +747,7 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
     PartDetection cur = d;
     for (int round = 0; round < kSplitRounds; ++round) {
       size_t foreign = 0;
-      std::vector<Vec3> pts = near(cur, m, &foreign);
+      std::vector<Vec3> pts = round == 0 ? std::move(b->second) : near(cur, m, &foreign);  // the first: gathered above
       PartDetection r;
       if (pts.size() < 3 || !polishOn(std::move(pts), m, cfg, support_plane, cur, cur.pose.cast<float>(), &whole, &seen, light, &r) ||
           r.fitness <= cur.fitness)
