@@ -256,7 +256,7 @@ int runOutliers(const Options& o) {
 struct ScoredDetection {
   std::string model;
   Eigen::Isometry3d pose;
-  double fitness = 0, coverage = 0, rmse = 0, see_through = 0, unseen = 0;
+  double fitness = 0, coverage = 0, rmse = 0, see_through = 0, unseen = 0, continuation = 0;
 };
 
 /// Detections against a scene's truth: each object takes the nearest unused detection of its
@@ -298,6 +298,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
       p["rmse_mm"] = dets[bi].rmse * 1e3;
       p["see_through"] = dets[bi].see_through;
       p["unseen"] = dets[bi].unseen;
+      p["continuation"] = dets[bi].continuation;
       terr->push_back(be.translation * 1e3);
       rerr->push_back(be.rotation / kDeg);
       ++counts->tp;
@@ -319,7 +320,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
     const Eigen::Vector3d at = dets[i].pose * centroids.centroid(dets[i].model);
     json f = {{"model", dets[i].model},       {"fitness", dets[i].fitness}, {"coverage", dets[i].coverage},
               {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through}, {"unseen", dets[i].unseen},
-              {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)},
+              {"continuation", dets[i].continuation}, {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)},
               {"detection", i}};
     double nearest = 1e9;
     for (const auto& o : scene.objects) {
@@ -439,7 +440,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, light,
                                     &cr.fragments);
   std::vector<ScoredDetection> dets;
-  for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through, d.unseen});
+  for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through, d.unseen, d.continuation});
   json sj = scoreDetections(scene, lib, matcher, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, counts, terr, rerr);
   // a missed part: the pose of its model nearest the truth that validation refused, with the
   // figures it failed on
@@ -455,7 +456,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
         nearest = e.translation;
         p["nearest_rejected"] = {{"fitness", r.fitness},       {"coverage", r.coverage},
                                  {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through}, {"unseen", r.unseen},
-                                 {"cluster", r.cluster},       {"t_err_mm", e.translation * 1e3},
+                                 {"continuation", r.continuation}, {"cluster", r.cluster},       {"t_err_mm", e.translation * 1e3},
                                  {"r_err_deg", e.rotation / kDeg},
                                  {"pose", cellsight_tools::poseToJson(r.pose)}};
       }
@@ -484,6 +485,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
                               {"rmse_mm", r.rmse * 1e3},
                               {"see_through", r.see_through},
                               {"unseen", r.unseen},
+                              {"continuation", r.continuation},
                               {"right", t_err <= o.max_t_mm * 1e-3 && r_err <= o.max_r_deg * kDeg}});
   }
   if (on_object) describeScanPoints(scene, lib, cloud, *on_object, dets, &sj);

@@ -444,17 +444,21 @@ TEST(ModelMatching, ARefusedPieceOfASplitPartIsPolishedOnTheOtherPiece) {
 // (its flat bottom, 50 x 30 mm, on the cylinder's top) explains the top and overhangs it only
 // at its corners. Its arms then reach into the table, which parts rest on, not in (0.97 mm below
 // z = 0 here, 0.9 mm below the table the evaluation fitted): with the support limits of 1 mm it
-// is taken for a holder, with the shipped 0.5 mm it is refused.
+// is taken for a holder, with the shipped 0.5 mm it is refused. The top, 48 mm across, also
+// carries on past the holder's 30 mm sides (Surface carried on): the shipped continuation test,
+// off here to show the support limits alone, refuses it at 1 mm too.
 TEST(ModelMatching, AHolderSunkIntoTheTableByAMillimetreIsRefused) {
   const RecordedCell cell = recordedCell({{"cylinder_distractor_3061.ply", 934}}, "sweep_capture_seed_3.txt");
-  auto run = [&](double limit) {
+  auto run = [&](double limit, bool continuation) {
     MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
     c.viewpoint = kEye;
     if (limit > 0) c.max_support_penetration = c.max_support_gap = limit;
+    if (!continuation) c.max_continuation = 1;
     const Eigen::Vector4f table(0, 0, 1, 0);
     return ModelMatcher(library(), c).locate(cell.clusters, {"holder"}, nullptr, nullptr, &table, nullptr, &cell.sweep);
   };
-  const auto taken = run(0.001), shipped = run(0);
+  const auto taken = run(0.001, false), shipped = run(0, false);
+  EXPECT_TRUE(run(0.001, true).empty()) << "the continuation test does not refuse the holder on the cylinder";
   ASSERT_EQ(taken.size(), 1u) << "the cylinder is not taken for a holder at 1 mm: the test no longer shows what 0.5 mm adds";
   double sunk = 0;
   for (const auto& v : library()->model("holder").mesh.vertices) sunk = std::max(sunk, -(taken[0].pose * v.cast<double>()).z());
@@ -462,6 +466,33 @@ TEST(ModelMatching, AHolderSunkIntoTheTableByAMillimetreIsRefused) {
               taken[0].rmse * 1e3, sunk * 1e3);
   EXPECT_GT(sunk, 0.5e-3);
   EXPECT_TRUE(shipped.empty());
+}
+
+// A cylinder that is not in the library, 48.6 mm across and 39.6 mm tall, recorded in generated
+// cell 3007 (capture seed 3's calibration, with the scan's sweep): among 24 rest poses, the
+// L-bracket upside down, its wall (40 mm) on the table and its base plate's underside up, puts
+// that underside on the cylinder's top (coverage 0.96), and no test of the bracket's own surface
+// refuses it. The plate is 40 mm wide and the top 48.6 mm across: the top carries on past the
+// plate's long edges in its plane, where a bracket's surface ends. With the continuation test
+// off it is taken for a bracket; as shipped it is refused.
+TEST(ModelMatching, APartFittedOntoALargerObjectsFaceIsRefused) {
+  const RecordedCell cell = recordedCell({{"cylinder_distractor_3007.ply", 765}}, "sweep_capture_seed_3.txt");
+  const MatchingConfig shipped = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
+  auto run = [&](double max_continuation) {
+    MatchingConfig c = shipped;
+    c.viewpoint = kEye;
+    c.rest_candidates = std::max(c.rest_candidates, 24);
+    c.max_continuation = max_continuation;
+    const Eigen::Vector4f table(0, 0, 1, 0);
+    return ModelMatcher(library(), c).locate(cell.clusters, {"bracket"}, nullptr, nullptr, &table, nullptr, &cell.sweep);
+  };
+  ASSERT_LT(shipped.max_continuation, 1.0) << "the continuation test is off as shipped";
+  const auto off = run(1.0), on = run(shipped.max_continuation);
+  ASSERT_EQ(off.size(), 1u) << "the cylinder is not taken for a bracket without the test: it no longer shows what the test adds";
+  std::printf("bracket on the cylinder: fitness %.2f, coverage %.2f, continuation %.4f (shipped limit %.4f)\n", off[0].fitness,
+              off[0].coverage, off[0].continuation, shipped.max_continuation);
+  EXPECT_GT(off[0].continuation, shipped.max_continuation);
+  EXPECT_TRUE(on.empty());
 }
 
 // A holder lying on an arm shows the camera its upper arm's outer face, 30 x 32 mm: turned 90
@@ -871,6 +902,9 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
       {"turned_rmse_ratio: 0\n", "turned_rmse_ratio"},
       {"unseen_second_look: 2\n", "unseen_second_look"},
       {"split_second_look: maybe\n", "split_second_look"},
+      {"max_continuation: 1.5\n", "max_continuation"},
+      {"continuation_reach: 0\n", "continuation_reach"},
+      {"continuation_tolerance: -0.001\n", "continuation_tolerance"},
       {"turned_rmse_ratio: 1.5\n", "turned_rmse_ratio"},
       {"turned_poses: maybe\n", "turned_poses"},
   };

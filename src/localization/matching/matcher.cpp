@@ -59,9 +59,14 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
     out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
     out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
     // traced (rays through the scan) for a pose that passes every other test, the fitness test at
-    // half its floor: a refused pose reports it too (MatchStats::rejected)
+    // half its floor: a refused pose reports it too (MatchStats::rejected); the surface carried on
+    // past the model's faces likewise
     out->unseen = 0;
-    if (s.light && accepted(*out, cfg, 0.5 * cfg.min_fitness)) visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
+    out->continuation = 0;
+    if (s.light && accepted(*out, cfg, 0.5 * cfg.min_fitness)) {
+      visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
+      out->continuation = continuation(s, m, T, cfg, support);
+    }
   };
   score(r.T, c);
   // the unseen share is not asked before centring: a pose left a millimetre off across a narrow

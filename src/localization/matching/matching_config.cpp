@@ -119,6 +119,9 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.turned_poses = m.getBool("turned_poses", c.turned_poses);
   c.unseen_second_look = m.getBool("unseen_second_look", c.unseen_second_look);
   c.split_second_look = m.getBool("split_second_look", c.split_second_look);
+  c.max_continuation = m.getDouble("max_continuation", c.max_continuation);
+  c.continuation_reach = m.getDouble("continuation_reach", c.continuation_reach);
+  c.continuation_tolerance = m.getDouble("continuation_tolerance", c.continuation_tolerance);
   c.turned_rmse_ratio = m.getDouble("turned_rmse_ratio", c.turned_rmse_ratio);
   if (!(c.turned_rmse_ratio > 0 && c.turned_rmse_ratio <= 1)) m.fail("turned_rmse_ratio", "must be in (0, 1]");
   positive("icp_slack_range", c.icp_slack_range);
@@ -146,6 +149,9 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   if (!(c.max_support_gap >= 0)) m.fail("max_support_gap", "must be >= 0 (0: off)");
   share("max_see_through", c.max_see_through);
   share("max_unseen", c.max_unseen);
+  share("max_continuation", c.max_continuation);
+  positive("continuation_reach", c.continuation_reach);
+  positive("continuation_tolerance", c.continuation_tolerance);
   positive("unseen_radius", c.unseen_radius);
   positive("unseen_view_angle", c.unseen_view_angle);
   if (c.unseen_view_angle > c.max_view_angle) m.fail("unseen_view_angle", "must be <= max_view_angle");

@@ -308,6 +308,11 @@ double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eig
 /// response at its camera incidence (see_through and unseen count them alike).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
                       const MatchingConfig& cfg, double* see_through = nullptr, double* unseen = nullptr);
+/// Cluster points (s.coarse) carrying on a face of the model under T past its edge, per cluster
+/// point the model explains (MatchingConfig::max_continuation); support: points within
+/// continuation_reach of it are left out.
+double continuation(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
+                    const MatchingConfig& cfg, const Eigen::Vector4f* support);
 /// How far the model under T reaches below the support plane (m; <= 0: not at all).
 float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane);
 /// The pose is not physical for a part resting on the support: sunk deeper than

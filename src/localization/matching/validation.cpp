@@ -198,6 +198,43 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   return visible ? static_cast<double>(matched) / visible : 0.0;
 }
 
+double continuation(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
+                    const MatchingConfig& cfg, const Eigen::Vector4f* support) {
+  const Eigen::Isometry3f Ti = T.inverse();
+  const float r = static_cast<float>(cfg.fitness_radius), reach = static_cast<float>(cfg.continuation_reach);
+  const float tol = static_cast<float>(cfg.continuation_tolerance);
+  const auto& fp = m.fine->points;
+  const auto& fn = m.fine->normals;
+  if (fn.size() != fp.size()) return 0;
+  std::vector<int> idx(1);
+  std::vector<float> d2(1), near_d2;
+  std::vector<int> near;
+  size_t explained = 0, beyond = 0;
+  for (size_t i = 0; i < s.coarse.size(); ++i) {
+    const Vec3& p = s.coarse.points[i];
+    const Vec3 q = Ti * p;
+    if (m.fine_tree.nearestKSearch(pcl::PointXYZ(q.x(), q.y(), q.z()), 1, idx, d2) != 1) continue;
+    if (d2[0] <= r * r) {
+      ++explained;
+      continue;
+    }
+    if (d2[0] > reach * reach) continue;
+    if (support && support->head<3>().dot(p) + support->w() <= reach) continue;  // the table carries on the bottom
+    if (i >= s.coarse.normals.size()) continue;
+    const Vec3 sn = Ti.linear() * s.coarse.normals[i];
+    // a face near it whose plane it lies in, facing as the scan's surface does there
+    bool carries = false;
+    m.fine_tree.radiusSearch(pcl::PointXYZ(q.x(), q.y(), q.z()), reach, near, near_d2);
+    for (size_t k = 0; k < near.size() && !carries; ++k) {
+      const size_t j = static_cast<size_t>(near[k]);
+      carries = std::abs(sn.dot(fn[j])) >= 0.9f && std::abs(fn[j].dot(q - fp[j])) <= tol;
+    }
+    if (!carries) continue;
+    ++beyond;
+  }
+  return explained ? static_cast<double>(beyond) / static_cast<double>(explained) : 0.0;
+}
+
 /// How far the model under T reaches below the support plane (m; <= 0: not at all).
 float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane) {
   float lowest = std::numeric_limits<float>::infinity();
@@ -216,7 +253,7 @@ bool accepted(const PartDetection& d, const MatchingConfig& cfg) { return accept
 
 bool accepted(const PartDetection& d, const MatchingConfig& cfg, double min_fitness) {
   return d.score > 0 && d.fitness >= min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse &&
-         d.see_through <= cfg.max_see_through && d.unseen <= cfg.max_unseen;
+         d.see_through <= cfg.max_see_through && d.unseen <= cfg.max_unseen && d.continuation <= cfg.max_continuation;
 }
 
 }  // namespace matching_detail
