@@ -172,16 +172,17 @@ struct MatchingConfig {
   /// its edges, at grazing angles or in another part's shadow. Needs the LightSweep; 1: off.
   double max_unseen = 1.0;
   double unseen_radius = 0.003;      ///< m
+  double unseen_view_angle = 1.05;   ///< rad
   /// At most this many cluster points per explained one may carry on a model face's plane past
-  /// its edge: farther than fitness_radius from the model and within continuation_reach, within
-  /// continuation_tolerance of the nearest face's plane, the scan's normal along it, above the
-  /// support by more than continuation_reach. A part fitted onto a larger object that shares a
+  /// its edge: farther than fitness_radius from the model and within continuation_reach (which
+  /// must exceed it), within continuation_tolerance of the plane of a face within that reach whose
+  /// normal the scan's there follows (|cos| >= 0.9), above the support by more than
+  /// continuation_reach. A part fitted onto a larger object that shares a
   /// face with it (a bracket's plate on a cylinder's top) leaves such points; a true part's
-  /// faces end where the scan's do. 1: off.
+  /// faces end where the scan's do. Taken where unseen is (PartDetection::continuation); 1: off.
   double max_continuation = 1.0;
   double continuation_reach = 0.004;       ///< m
   double continuation_tolerance = 0.00025; ///< m
-  double unseen_view_angle = 1.05;   ///< rad
   /// Once every part is found, each cluster's best pose refused for unseen surface alone, clear of
   /// the parts found, is tested again with their models stopping rays and beams too (a part whose
   /// side towards it was not measured still shades it), and accepted if it passes then.

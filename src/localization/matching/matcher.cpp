@@ -73,6 +73,7 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
   // face claims surface past the face's scanned edge, and is measured again where it settles
   PartDetection before = *c;
   before.unseen = 0;
+  before.continuation = 0;
   if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(before, cfg)) {
     const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, r.polished_fresh, cfg).inverse()).cast<float>();
     PartDetection centred;
@@ -749,6 +750,9 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
     const std::vector<Vec3> own = clusterPoints(clusters[static_cast<size_t>(d.cluster)], cfg);
     if (own.size() < 3) continue;
     const std::unique_ptr<SceneData> cluster_scene = prepareScene(own, cfg);
+    cluster_scene->whole = &whole;
+    cluster_scene->support_seen = &seen;
+    if (light && cfg.check_illumination && !light->empty()) cluster_scene->light = light;
     PartDetection cur = d;
     for (int round = 0; round < kSplitRounds; ++round) {
       size_t foreign = 0;
@@ -762,6 +766,16 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
       const double step = modelMove(m, cur.pose, r.pose);
       cur = r;
       if (step < kSplitSettled) break;
+    }
+    if (cur.pose.matrix() != d.pose.matrix()) {
+      // polished on points gathered near the model: the unseen share and the surface carried on
+      // are taken again with its own cluster (they were traced only if the gathered points passed)
+      const Eigen::Isometry3f T = cur.pose.cast<float>();
+      cur.unseen = cur.continuation = 0;
+      if (cluster_scene->light && accepted(cur, cfg, 0.5 * cfg.min_fitness)) {
+        visibleFitness(*cluster_scene, m, T, cfg, nullptr, &cur.unseen);
+        cur.continuation = continuation(*cluster_scene, m, T, cfg, support_plane);
+      }
     }
     if (accepted(cur, cfg) && clear(cur)) look.take(i, cur, m);
   }

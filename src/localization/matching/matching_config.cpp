@@ -33,7 +33,8 @@ MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_dia
   MatchingConfig c = base;
   for (double* v : {&c.voxel, &c.normal_radius, &c.feature_radius, &c.ppf_sampling, &c.ppf_distance_step,
                     &c.inlier_distance, &c.icp_spacing, &c.icp_huber_floor, &c.icp_slack_range, &c.icp_slack_tolerance,
-                    &c.fitness_radius, &c.max_rmse, &c.max_support_penetration, &c.max_support_gap})
+                    &c.fitness_radius, &c.max_rmse, &c.max_support_penetration, &c.max_support_gap,
+                    &c.continuation_reach, &c.continuation_tolerance})
     *v *= r;
   return c;
 }
@@ -119,9 +120,6 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.turned_poses = m.getBool("turned_poses", c.turned_poses);
   c.unseen_second_look = m.getBool("unseen_second_look", c.unseen_second_look);
   c.split_second_look = m.getBool("split_second_look", c.split_second_look);
-  c.max_continuation = m.getDouble("max_continuation", c.max_continuation);
-  c.continuation_reach = m.getDouble("continuation_reach", c.continuation_reach);
-  c.continuation_tolerance = m.getDouble("continuation_tolerance", c.continuation_tolerance);
   c.turned_rmse_ratio = m.getDouble("turned_rmse_ratio", c.turned_rmse_ratio);
   if (!(c.turned_rmse_ratio > 0 && c.turned_rmse_ratio <= 1)) m.fail("turned_rmse_ratio", "must be in (0, 1]");
   positive("icp_slack_range", c.icp_slack_range);
@@ -152,6 +150,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   share("max_continuation", c.max_continuation);
   positive("continuation_reach", c.continuation_reach);
   positive("continuation_tolerance", c.continuation_tolerance);
+  if (!(c.continuation_reach > c.fitness_radius)) m.fail("continuation_reach", "must exceed fitness_radius (m)");
   positive("unseen_radius", c.unseen_radius);
   positive("unseen_view_angle", c.unseen_view_angle);
   if (c.unseen_view_angle > c.max_view_angle) m.fail("unseen_view_angle", "must be <= max_view_angle");

@@ -320,7 +320,8 @@ float belowSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T
 /// it; `slack` widens both (coarse poses are a few millimetres off).
 bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& plane,
                 const MatchingConfig& cfg, float slack = 0.f);
-/// The detection passes min_fitness, min_coverage, max_rmse, max_see_through and max_unseen.
+/// The detection passes min_fitness, min_coverage, max_rmse, max_see_through, max_unseen and
+/// max_continuation (1: off).
 bool accepted(const PartDetection& d, const MatchingConfig& cfg);
 /// ... with this fitness floor instead of min_fitness.
 bool accepted(const PartDetection& d, const MatchingConfig& cfg, double min_fitness);

@@ -253,7 +253,8 @@ bool accepted(const PartDetection& d, const MatchingConfig& cfg) { return accept
 
 bool accepted(const PartDetection& d, const MatchingConfig& cfg, double min_fitness) {
   return d.score > 0 && d.fitness >= min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse &&
-         d.see_through <= cfg.max_see_through && d.unseen <= cfg.max_unseen && d.continuation <= cfg.max_continuation;
+         d.see_through <= cfg.max_see_through && d.unseen <= cfg.max_unseen &&
+         (cfg.max_continuation >= 1 || d.continuation <= cfg.max_continuation);
 }
 
 }  // namespace matching_detail
