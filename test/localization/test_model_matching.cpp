@@ -904,7 +904,7 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
       {"split_second_look: maybe\n", "split_second_look"},
       {"max_continuation: 1.5\n", "max_continuation"},
       {"continuation_reach: 0\n", "continuation_reach"},
-      {"continuation_reach: 0.0015\n", "continuation_reach"},  // within fitness_radius
+      {"max_continuation: 0.01\ncontinuation_reach: 0.0015\n", "continuation_reach"},  // within fitness_radius
       {"continuation_tolerance: -0.001\n", "continuation_tolerance"},
       {"turned_rmse_ratio: 1.5\n", "turned_rmse_ratio"},
       {"turned_poses: maybe\n", "turned_poses"},

@@ -175,7 +175,7 @@ struct MatchingConfig {
   double unseen_view_angle = 1.05;   ///< rad
   /// At most this many cluster points per explained one may carry on a model face's plane past
   /// its edge: farther than fitness_radius from the model and within continuation_reach (which
-  /// must exceed it), within continuation_tolerance of the plane of a face within that reach whose
+  /// must exceed it while the test is on), within continuation_tolerance of the plane of a face within that reach whose
   /// normal the scan's there follows (|cos| >= 0.9), above the support by more than
   /// continuation_reach. A part fitted onto a larger object that shares a
   /// face with it (a bracket's plate on a cylinder's top) leaves such points; a true part's

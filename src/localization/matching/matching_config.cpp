@@ -150,7 +150,8 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   share("max_continuation", c.max_continuation);
   positive("continuation_reach", c.continuation_reach);
   positive("continuation_tolerance", c.continuation_tolerance);
-  if (!(c.continuation_reach > c.fitness_radius)) m.fail("continuation_reach", "must exceed fitness_radius (m)");
+  if (c.max_continuation < 1 && !(c.continuation_reach > c.fitness_radius))
+    m.fail("continuation_reach", "must exceed fitness_radius (m) while max_continuation is on");
   positive("unseen_radius", c.unseen_radius);
   positive("unseen_view_angle", c.unseen_view_angle);
   if (c.unseen_view_angle > c.max_view_angle) m.fail("unseen_view_angle", "must be <= max_view_angle");
