@@ -45,6 +45,17 @@ MatchingConfig callSettings(const MatchingConfig& config, const Eigen::Vector3f*
 /// ICP from T0 (polished with exact neighbours when `polish`), scored into *c (a copy of `d`
 /// with the pose and its figures); a polished pose good enough to report goes to the middle of
 /// its slack, kept if it still is. False when the ICP diverged or the pose is off the support.
+/// The unseen share and the surface carried on past the model's faces of d under T, traced (rays
+/// through the scan) only for a pose that passes every other test, the fitness test at half its
+/// floor, with a sweep (a refused pose reports them too, MatchStats::rejected); 0 otherwise.
+void traceSurfaceTests(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
+                       const MatchingConfig& cfg, const Eigen::Vector4f* support, PartDetection* d) {
+  d->unseen = d->continuation = 0;
+  if (!s.light || !accepted(*d, cfg, 0.5 * cfg.min_fitness)) return;
+  visibleFitness(s, m, T, cfg, nullptr, &d->unseen);
+  d->continuation = continuation(s, m, T, cfg, support);
+}
+
 bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                 const Eigen::Vector4f* support, const PartDetection& d, const Eigen::Isometry3f& T0, size_t points,
                 bool polish, PartDetection* c) {
@@ -58,15 +69,7 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
     out->coverage = coverage(s, m, T, cfg.fitness_radius);
     out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
     out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
-    // traced (rays through the scan) for a pose that passes every other test, the fitness test at
-    // half its floor: a refused pose reports it too (MatchStats::rejected); the surface carried on
-    // past the model's faces likewise
-    out->unseen = 0;
-    out->continuation = 0;
-    if (s.light && accepted(*out, cfg, 0.5 * cfg.min_fitness)) {
-      visibleFitness(s, m, T, cfg, nullptr, &out->unseen);
-      out->continuation = continuation(s, m, T, cfg, support);
-    }
+    traceSurfaceTests(s, m, T, cfg, support, out);
   };
   score(r.T, c);
   // the unseen share is not asked before centring: a pose left a millimetre off across a narrow
@@ -767,16 +770,9 @@ void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::sh
       cur = r;
       if (step < kSplitSettled) break;
     }
-    if (cur.pose.matrix() != d.pose.matrix()) {
-      // polished on points gathered near the model: the unseen share and the surface carried on
-      // are taken again with its own cluster (they were traced only if the gathered points passed)
-      const Eigen::Isometry3f T = cur.pose.cast<float>();
-      cur.unseen = cur.continuation = 0;
-      if (cluster_scene->light && accepted(cur, cfg, 0.5 * cfg.min_fitness)) {
-        visibleFitness(*cluster_scene, m, T, cfg, nullptr, &cur.unseen);
-        cur.continuation = continuation(*cluster_scene, m, T, cfg, support_plane);
-      }
-    }
+    // polished on points gathered near the model: its traced tests are taken again with its own
+    // cluster (on the gathered points they were traced only if those passed)
+    if (cur.pose.matrix() != d.pose.matrix()) traceSurfaceTests(*cluster_scene, m, cur.pose.cast<float>(), cfg, support_plane, &cur);
     if (accepted(cur, cfg) && clear(cur)) look.take(i, cur, m);
   }
   st.split_second_look += look.finish();
