@@ -802,6 +802,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     double scene_seconds = 0, descriptor_seconds = 0;
     std::string warning;  // of its scene preparation
     double min_coverage = 1e9;  // asked of a detection here: the config's, less on a second look
+    int found = 0;              // detections its cluster has given so far (max_instances bounds them)
     std::vector<PartDetection> per_model;
   };
   SupportSeen seen;
@@ -855,7 +856,9 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
   PointGrid whole;
   if (cfg.fitness_whole_scan && !round.empty() && (round.size() > 1 || !pieces.empty()))
     whole = PointGrid(scan, static_cast<float>(cfg.fitness_radius));
-  for (int instance = 0; instance < std::max(1, cfg.max_instances) && !round.empty(); ++instance) {
+  // a round searches what is left of each cluster; a second look takes a round but finds no
+  // more parts than max_instances, so the rounds are bounded by twice that
+  for (int instance = 0; instance < 2 * std::max(1, cfg.max_instances) && !round.empty(); ++instance) {
     parallelFor(round.size(), cfg.threads, [&](size_t i) {
       const auto t = Clock::now();
       round[i].scene = prepareScene(round[i].points, cfg);
@@ -954,6 +957,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
           again.cluster = w.cluster;
           again.points = std::move(w.points);
           again.min_coverage = 0.5 * cfg.min_coverage;
+          again.found = w.found;
           next.push_back(std::move(again));
         }
         continue;
@@ -965,6 +969,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       const float r2 = static_cast<float>(4 * cfg.fitness_radius * cfg.fitness_radius);
       Work rest;
       rest.cluster = w.cluster;
+      rest.found = w.found + 1;
       for (const auto& p : w.points) {
         const Vec3 q = Ti * p;
         const int j = mi.field.lookup(q);
@@ -972,7 +977,8 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
       }
       d.pose = canonicalPose(mi.info, mi.centroid, d.pose);
       out.push_back(d);
-      if (cfg.min_coverage > 0 && static_cast<int>(rest.points.size()) >= cfg.min_instance_points) {
+      if (cfg.min_coverage > 0 && rest.found < cfg.max_instances &&
+          static_cast<int>(rest.points.size()) >= cfg.min_instance_points) {
         next.push_back(std::move(rest));
       }
     }
