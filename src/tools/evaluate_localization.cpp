@@ -496,6 +496,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   sj["locate_seconds"] = st.seconds;
   sj["split_parts_polished"] = st.split_parts_polished;
   sj["turned_poses"] = st.turned_poses;
+  sj["interpenetrating"] = st.interpenetrating;
   return sj;
 }
 

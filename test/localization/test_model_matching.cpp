@@ -654,6 +654,41 @@ TEST(ModelMatching, ThreeTouchingPartsInOneClusterAreAllFound) {
   EXPECT_EQ(ModelMatcher(library(), c).locate(cell.clusters, {}, nullptr, nullptr, &table, nullptr, &cell.sweep).size(), 2u);
 }
 
+// A bracket standing on its base plate, recorded in generated cell 3460 (the true calibration,
+// with the scan's sweep): clustering puts its plate (595 points) and its wall's top, 40 mm up
+// (101 points), apart. The plate gives the bracket; on the wall top alone a second bracket is
+// fitted lying on its side (fitness 0.59), its model inside the first's (6.6 % of its surface
+// deeper than 1 mm), 24 mm from it: farther than the pieces of one split part are merged. Two
+// solid parts cannot share space: the better explained stays.
+TEST(ModelMatching, TwoDetectionsThatWouldShareSpaceKeepTheBetterExplained) {
+  const RecordedCell cell =
+      recordedCell({{"bracket_base_plate_3460.ply", 595}, {"bracket_wall_top_3460.ply", 101}}, "sweep_true_calibration.txt");
+  const Eigen::Isometry3d truth =
+      truePose({0.39045901427798374, 0.034167931306774063, 0}, {0.63993674883604124, 0, 0, 0.76842758766793218});
+  const MatchingConfig shipped = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
+  auto run = [&](double max_interpenetration, MatchStats* st) {
+    MatchingConfig c = shipped;
+    c.viewpoint = kEye;
+    c.max_interpenetration = max_interpenetration;
+    const Eigen::Vector4f table(0, 0, 1, 0);
+    return ModelMatcher(library(), c).locate(cell.clusters, {"bracket"}, st, nullptr, &table, nullptr, &cell.sweep);
+  };
+  ASSERT_LT(shipped.max_interpenetration, 1.0) << "the interpenetration test is off as shipped";
+  MatchStats off_st, on_st;
+  const auto off = run(1.0, &off_st), on = run(shipped.max_interpenetration, &on_st);
+  ASSERT_EQ(off.size(), 2u) << "no second bracket without the test: it no longer shows what the test adds";
+  EXPECT_EQ(off_st.interpenetrating, 0u);
+  ASSERT_EQ(on.size(), 1u);
+  EXPECT_EQ(on_st.interpenetrating, 1u);
+  EXPECT_TRUE(std::any_of(on_st.warnings.begin(), on_st.warnings.end(),
+                          [](const std::string& w) { return w.find("would share space") != std::string::npos; }));
+  const PoseError e = poseError(library()->model("bracket").info, ModelMatcher(library(), shipped).centroid("bracket"), on[0].pose, truth);
+  std::printf("kept: %.2f mm, %.2f deg off, fitness %.2f (the other's %.2f)\n", e.translation * 1e3, e.rotation * 180 / M_PI,
+              on[0].fitness, std::min(off[0].fitness, off[1].fitness));
+  EXPECT_LT(e.translation, 1e-3);
+  EXPECT_LT(e.rotation, 2 * M_PI / 180);
+}
+
 namespace {
 /// A housing's single view cut across x: `percent` of its points below the cut, the rest above.
 struct SplitView {
@@ -940,6 +975,8 @@ TEST(ModelMatching, BadInputGivesClearStatus) {
       {"continuation_reach: 0\n", "continuation_reach"},
       {"max_continuation: 0.01\ncontinuation_reach: 0.0015\n", "continuation_reach"},  // within fitness_radius
       {"continuation_tolerance: -0.001\n", "continuation_tolerance"},
+      {"max_interpenetration: -0.1\n", "max_interpenetration"},
+      {"interpenetration_depth: 0\n", "interpenetration_depth"},
       {"turned_rmse_ratio: 1.5\n", "turned_rmse_ratio"},
       {"turned_poses: maybe\n", "turned_poses"},
   };

@@ -183,6 +183,13 @@ struct MatchingConfig {
   double max_continuation = 1.0;
   double continuation_reach = 0.004;       ///< m
   double continuation_tolerance = 0.00025; ///< m
+  /// Two solid parts cannot share space: where more than this share of one detection's model
+  /// surface lies deeper than interpenetration_depth inside another's mesh (either way), the
+  /// better explained (higher fitness) stays, with a warning naming both (a piece of a part that
+  /// clustering split, matched elsewhere on the part's own points). 1: off (config/matching.yaml:
+  /// 0.02).
+  double max_interpenetration = 1.0;
+  double interpenetration_depth = 0.001;  ///< m
   /// Once every part is found, each cluster's best pose refused for unseen surface alone, clear of
   /// the parts found, is tested again with their models stopping rays and beams too (a part whose
   /// side towards it was not measured still shades it), and accepted if it passes then.
@@ -263,6 +270,8 @@ struct MatchStats {
   size_t unseen_second_look = 0;
   /// refused poses of split parts polished on the points near them and accepted (split_second_look)
   size_t split_second_look = 0;
+  /// detections dropped because a better explained one's model holds them (max_interpenetration)
+  size_t interpenetrating = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
 };

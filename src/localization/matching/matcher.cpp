@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <numeric>
 #include <stdexcept>
@@ -619,6 +620,60 @@ bool clearOfFound(const PartDetection& d, const std::vector<PartDetection>& kept
   return true;
 }
 
+/// Share of b's model surface (its fine points, at most ~4 000 of them evenly) that lies deeper
+/// than `depth` inside a's mesh. A point counts only where its closest point on a's mesh lies
+/// inside a triangle, straight along its normal: beside an edge the closest triangle's normal
+/// does not tell inside from outside (a point level with a thin blade's edge).
+double interpenetration(const PartDetection& a, const ModelMatcher::ModelIndex& ma, const PartDetection& b,
+                        const ModelMatcher::ModelIndex& mb, float depth) {
+  if (!ma.has_mesh || !mb.fine || mb.fine->points.empty()) return 0;
+  const Eigen::Isometry3f Tab = (a.pose.inverse() * b.pose).cast<float>();
+  const size_t step = std::max<size_t>(1, mb.fine->points.size() / 4000);
+  size_t inside = 0, n = 0;
+  for (size_t i = 0; i < mb.fine->points.size(); i += step, ++n) {
+    const Vec3 q = Tab * mb.fine->points[i];
+    const ClosestPoint c = ma.caster.closestPoint(q, ma.diameter);
+    if (!c.found) continue;
+    const float along = -(q - c.point).dot(c.normal);
+    if (along > depth && along >= 0.99f * (q - c.point).norm()) ++inside;
+  }
+  return n ? static_cast<double>(inside) / static_cast<double>(n) : 0.0;
+}
+
+/// Drops every detection that shares space with a better explained one (max_interpenetration).
+void dropInterpenetrating(std::vector<PartDetection>& kept, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                          const std::vector<std::string>& models, const MatchingConfig& cfg, MatchStats& st) {
+  if (cfg.max_interpenetration >= 1 || kept.size() < 2) return;
+  std::vector<size_t> order(kept.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return kept[a].fitness > kept[b].fitness; });
+  std::vector<bool> drop(kept.size(), false);
+  const float depth = static_cast<float>(cfg.interpenetration_depth);
+  for (size_t i = 1; i < order.size(); ++i) {
+    const PartDetection& d = kept[order[i]];
+    const ModelMatcher::ModelIndex& md = indexOf(idx, models, d.model);
+    for (size_t j = 0; j < i && !drop[order[i]]; ++j) {
+      if (drop[order[j]]) continue;
+      const PartDetection& k = kept[order[j]];
+      const ModelMatcher::ModelIndex& mk = indexOf(idx, models, k.model);
+      if ((d.pose * md.centroid - k.pose * mk.centroid).norm() > 0.5 * (md.diameter + mk.diameter)) continue;
+      const double share = std::max(interpenetration(k, mk, d, md, depth), interpenetration(d, md, k, mk, depth));
+      if (share <= cfg.max_interpenetration) continue;
+      drop[order[i]] = true;
+      ++st.interpenetrating;
+      char why[96];
+      std::snprintf(why, sizeof(why), "%.1f %% of a surface deeper than %.1f mm inside the other", 100 * share, depth * 1e3);
+      st.warnings.push_back(d.model + " (cluster " + std::to_string(d.cluster) + ", fitness " + std::to_string(d.fitness) +
+                            ") and " + k.model + " (cluster " + std::to_string(k.cluster) + ", fitness " + std::to_string(k.fitness) +
+                            ") would share space (" + why + "): the better explained kept");
+    }
+  }
+  std::vector<PartDetection> out;
+  for (size_t i = 0; i < kept.size(); ++i)
+    if (!drop[i]) out.push_back(std::move(kept[i]));
+  kept = std::move(out);
+}
+
 /// A cluster's finite points, thinned to max_cluster_points as locate() thins them.
 std::vector<Vec3> clusterPoints(const ScanCloud& cluster, const MatchingConfig& cfg) {
   std::vector<Vec3> points;
@@ -1022,6 +1077,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
     unseenSecondLook(kept, idx, models, clusters, whole, seen, light, cfg, st);
     st.refine_seconds += seconds(t_look);
   }
+  dropInterpenetrating(kept, idx, models, cfg, st);
   st.seconds = seconds(t0);
   return kept;
 }

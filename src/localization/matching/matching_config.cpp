@@ -34,7 +34,7 @@ MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_dia
   for (double* v : {&c.voxel, &c.normal_radius, &c.feature_radius, &c.ppf_sampling, &c.ppf_distance_step,
                     &c.inlier_distance, &c.icp_spacing, &c.icp_huber_floor, &c.icp_slack_range, &c.icp_slack_tolerance,
                     &c.fitness_radius, &c.max_rmse, &c.max_support_penetration, &c.max_support_gap,
-                    &c.continuation_reach, &c.continuation_tolerance})
+                    &c.continuation_reach, &c.continuation_tolerance, &c.interpenetration_depth})
     *v *= r;
   return c;
 }
@@ -152,6 +152,8 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   positive("continuation_tolerance", c.continuation_tolerance);
   if (c.max_continuation < 1 && !(c.continuation_reach > c.fitness_radius))
     m.fail("continuation_reach", "must exceed fitness_radius (m) while max_continuation is on");
+  share("max_interpenetration", c.max_interpenetration);
+  positive("interpenetration_depth", c.interpenetration_depth);
   positive("unseen_radius", c.unseen_radius);
   positive("unseen_view_angle", c.unseen_view_angle);
   if (c.unseen_view_angle > c.max_view_angle) m.fail("unseen_view_angle", "must be <= max_view_angle");
