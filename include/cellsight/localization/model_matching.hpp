@@ -190,9 +190,10 @@ struct MatchingConfig {
   /// 0.02).
   double max_interpenetration = 1.0;
   double interpenetration_depth = 0.001;  ///< m
-  /// Once every part is found, each cluster's best pose refused for unseen surface alone, clear of
-  /// the parts found, is tested again with their models stopping rays and beams too (a part whose
-  /// side towards it was not measured still shades it), and accepted if it passes then.
+  /// Once every part is found, each cluster's best pose refused for unseen surface or fitness alone
+  /// (the fitness at half min_fitness at least), clear of the parts found, is tested again with
+  /// their models stopping rays and beams too (a part whose side towards it was not measured still
+  /// shades it; what a found part hides or shades leaves the fitness), and accepted if it passes then.
   bool unseen_second_look = true;
   /// Once every part is found, each cluster's best refused pose that explains its cluster
   /// (min_coverage) and half of min_fitness, clear of them, whose model lies near points of other

@@ -703,9 +703,11 @@ struct SecondLook {
   }
 };
 
-/// A second look at refused poses: per cluster, the best pose refused for unseen surface alone
-/// that lies clear of every part found is tested again with those parts as occluders, and
-/// accepted if it passes then.
+/// A second look at refused poses: per cluster, the best pose refused for unseen surface or
+/// fitness alone (the fitness at half its floor at least) that lies clear of every part found is
+/// tested again with those parts as occluders (what they hide from the camera or shade from the
+/// sheet leaves the fitness; their meshes stop the unseen test's rays), and accepted if it
+/// passes then.
 /// The unseen test counts a model point the scan would have measured, with nothing the scan saw
 /// on its camera ray or its beam; a part beside it whose side towards it was not measured (too
 /// steep for the camera) still shades it, and only its model, once found, shows that.
@@ -715,14 +717,15 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
   std::vector<std::pair<const ModelMatcher::ModelIndex*, Eigen::Isometry3f>> found;
   for (const auto& k : kept) found.emplace_back(&indexOf(idx, models, k.model), k.pose.cast<float>().inverse());
   auto clear = [&](const PartDetection& d) { return clearOfFound(d, kept, idx, models); };
-  // per cluster, its best refused pose that passes every test but the unseen one
+  // per cluster, its best refused pose that passes every test but the unseen and fitness ones,
+  // the fitness at half its floor at least
   std::map<int, size_t> best;
   for (size_t i = 0; i < st.rejected.size(); ++i) {
     const PartDetection& d = st.rejected[i];
     if (d.cluster < 0 || static_cast<size_t>(d.cluster) >= clusters.size()) continue;
     PartDetection seen_all = d;
     seen_all.unseen = 0;
-    if (d.unseen <= cfg.max_unseen || !accepted(seen_all, cfg) || !clear(d)) continue;
+    if (!accepted(seen_all, cfg, 0.5 * cfg.min_fitness) || !clear(d)) continue;
     const auto it = best.find(d.cluster);
     if (it == best.end() || d.score > st.rejected[it->second].score) best[d.cluster] = i;
   }
@@ -739,10 +742,13 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
     sd->light = light;
     sd->found = &found;
     double unseen = 0;
-    visibleFitness(*sd, m, d.pose.cast<float>(), cfg, nullptr, &unseen);
-    if (unseen > cfg.max_unseen) continue;
+    const double fitness = visibleFitness(*sd, m, d.pose.cast<float>(), cfg, nullptr, &unseen);
+    // (what a found part hides or shades leaves the fitness: it may only rise)
+    if (unseen > cfg.max_unseen || std::max(fitness, d.fitness) < cfg.min_fitness) continue;
     PartDetection a = d;
     a.unseen = unseen;
+    a.fitness = std::max(fitness, d.fitness);
+    a.score = fitness * (cfg.min_coverage > 0 ? a.coverage : 1.0);
     look.take(i, a, m);
   }
   st.unseen_second_look += look.finish();

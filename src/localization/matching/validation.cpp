@@ -143,6 +143,21 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     if (-mn[i].dot(dir) < cos_max) return false;
     return !(m.has_mesh && m.caster.occluded(from, dir, 0.f, dist - margin));
   };
+  // a found part's mesh stands between p and `to` (scene frame; the second look, s.found): where
+  // the path enters it, as clearPath
+  auto shaded = [&](const Vec3& p, const Vec3& to) {
+    const Vec3 ray = to - p;
+    const float len = ray.norm();
+    if (len <= margin) return false;
+    const Vec3 dir = ray / len;
+    for (const auto& [part, Tp] : *s.found) {
+      if (!part->has_mesh) continue;
+      const Vec3 d = Tp.linear() * dir;
+      const RayHit hit = part->caster.intersect(Tp * p, d, margin, len);
+      if (hit.hit && hit.normal.dot(d) < 0) return true;
+    }
+    return false;
+  };
   for (size_t i = 0; i < mp.size(); ++i) {
     Vec3 emitter = Vec3::Zero();
     float fan_margin = 0;
@@ -150,6 +165,8 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
       if (!reaches(eye, i)) continue;  // the camera does not see it
       // no sheet of the sweep passed it, or the sheet did not reach it
       if (s.light && (!s.light->emitterFor(T * mp[i], &emitter, &fan_margin) || !reaches(Ti * emitter, i))) continue;
+      // a found part hides it from the camera or shades it from the sheet
+      if (s.found && (shaded(T * mp[i], cfg.viewpoint) || (s.light && shaded(T * mp[i], emitter)))) continue;
     }
     ++visible;
     float w = 1.f;
