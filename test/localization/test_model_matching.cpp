@@ -545,19 +545,24 @@ TEST(ModelMatching, ARestPoseTiedWithTurnedOnesIsWithinTheQuota) {
 // right, is refused for unseen surface (0.046 against 0.045). Its side towards the shaft lies in
 // the shaft's shadow, but the shaft's side that casts it was not measured, so no scan point lies
 // on those beams. Looked at again with the shaft's model shading it, the sphere is found.
+namespace {
+/// A recorded shaft and sphere located with the shipped settings, the second look on or off.
+std::vector<PartDetection> locateShaftAndSphere(const RecordedCell& cell, bool look, MatchStats* st) {
+  MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
+  c.viewpoint = kEye;
+  c.unseen_second_look = look;
+  const Eigen::Vector4f table(0, 0, 1, 0);
+  return ModelMatcher(library(), c).locate(cell.clusters, {"flanged_shaft", "sphere25"}, st, nullptr, &table, nullptr, &cell.sweep);
+}
+}  // namespace
+
 TEST(ModelMatching, APartShadedByAFoundPartIsLookedAtAgain) {
   const RecordedCell cell = recordedCell({{"shaft_and_sphere_3156.ply", 742}}, "sweep_capture_seed_1.txt");
   const Eigen::Isometry3d sphere = truePose({0.37548552399439833, -0.019222545979400714, 0}, {1, 0, 0, 0});
-  MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
-  c.viewpoint = kEye;
-  const Eigen::Vector4f table(0, 0, 1, 0);
-  auto run = [&](bool look, MatchStats* st) {
-    c.unseen_second_look = look;
-    return ModelMatcher(library(), c).locate(cell.clusters, {"flanged_shaft", "sphere25"}, st, nullptr, &table, nullptr, &cell.sweep);
-  };
   MatchStats once, twice;
-  const auto first = run(false, &once), second = run(true, &twice);
-  const Eigen::Vector3d centroid = ModelMatcher(library(), c).centroid("sphere25");
+  const auto first = locateShaftAndSphere(cell, false, &once), second = locateShaftAndSphere(cell, true, &twice);
+  const Eigen::Vector3d centroid =
+      ModelMatcher(library(), loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml")).centroid("sphere25");
   auto sphereError = [&](const std::vector<PartDetection>& found) {
     for (const auto& d : found)
       if (d.model == "sphere25") return poseError(library()->model("sphere25").info, centroid, d.pose, sphere).translation;
@@ -582,15 +587,9 @@ TEST(ModelMatching, APartShadedByAFoundPartIsFoundOnWhatItsLightReached) {
       recordedCell({{"shaft_top_3451.ply", 949}, {"sphere_in_a_shadow_3451.ply", 54}}, "sweep_true_calibration.txt");
   const Eigen::Isometry3d sphere =
       truePose({0.61611187677323098, 0.088461147351226316, 0}, {0.7313732056372243, 0, 0, 0.68197744396419047});
-  MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
-  c.viewpoint = kEye;
-  const Eigen::Vector4f table(0, 0, 1, 0);
-  auto run = [&](bool look, MatchStats* st) {
-    c.unseen_second_look = look;
-    return ModelMatcher(library(), c).locate(cell.clusters, {"flanged_shaft", "sphere25"}, st, nullptr, &table, nullptr, &cell.sweep);
-  };
+  const MatchingConfig c = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
   MatchStats once, twice;
-  const auto first = run(false, &once), second = run(true, &twice);
+  const auto first = locateShaftAndSphere(cell, false, &once), second = locateShaftAndSphere(cell, true, &twice);
   ASSERT_EQ(first.size(), 1u) << "the sphere is found at once now: the test no longer shows what the second look adds";
   EXPECT_EQ(first[0].model, "flanged_shaft");
   const auto refused = std::find_if(once.rejected.begin(), once.rejected.end(), [](const PartDetection& d) { return d.model == "sphere25" && d.cluster == 1; });

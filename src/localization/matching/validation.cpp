@@ -110,23 +110,28 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   const float r_unseen = static_cast<float>(cfg.unseen_radius);
   const float step = static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel));
   const bool has_support = s.support_seen && !s.support_seen->empty();
-  // nothing the scan measured lies within a step of the segment p → to, leaving p's own surface
+  // a found part's mesh (the second look: s.found) lies on the path from p along dir between
+  // near and far, where the path enters it (a path that first leaves a mesh starts inside that
+  // part: overlap, which must not pass for shade)
+  auto foundOnPath = [&](const Vec3& p, const Vec3& dir, float near, float far) {
+    if (!s.found) return false;
+    for (const auto& [part, Tp] : *s.found) {
+      if (!part->has_mesh) continue;
+      const Vec3 d = Tp.linear() * dir;
+      const RayHit hit = part->caster.intersect(Tp * p, d, near, far);
+      if (hit.hit && hit.normal.dot(d) < 0) return true;
+    }
+    return false;
+  };
+  // nothing the scan measured lies within a step of the segment p → to, leaving p's own surface,
+  // and no found part's mesh stops it
   auto clearPath = [&](const Vec3& p, const Vec3& to) {
     const Vec3 ray = to - p;
     const float len = std::min(ray.norm(), kUnseenReach);
     const Vec3 dir = ray.normalized();
     for (float t = r_unseen; t < len; t += step)
       if (scan->anyWithin(p + t * dir, step)) return false;
-    // a found part's mesh stops it where the path enters it (a path that first leaves a mesh
-    // starts inside that part: overlap, which must not pass for shade)
-    if (s.found)
-      for (const auto& [part, Tp] : *s.found) {
-        if (!part->has_mesh) continue;
-        const Vec3 d = Tp.linear() * dir;
-        const RayHit hit = part->caster.intersect(Tp * p, d, r_unseen, len);
-        if (hit.hit && hit.normal.dot(d) < 0) return false;
-      }
-    return true;
+    return !foundOnPath(p, dir, r_unseen, len);
   };
   // the unseen test's model points: 1 visible and lit, 2 also a candidate miss
   std::vector<uint8_t> state(test_unseen ? m.coarse->points.size() : 0, 0);
@@ -143,20 +148,10 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     if (-mn[i].dot(dir) < cos_max) return false;
     return !(m.has_mesh && m.caster.occluded(from, dir, 0.f, dist - margin));
   };
-  // a found part's mesh stands between p and `to` (scene frame; the second look, s.found): where
-  // the path enters it, as clearPath
+  // a found part's mesh stands between p and `to` (scene frame)
   auto shaded = [&](const Vec3& p, const Vec3& to) {
-    const Vec3 ray = to - p;
-    const float len = ray.norm();
-    if (len <= margin) return false;
-    const Vec3 dir = ray / len;
-    for (const auto& [part, Tp] : *s.found) {
-      if (!part->has_mesh) continue;
-      const Vec3 d = Tp.linear() * dir;
-      const RayHit hit = part->caster.intersect(Tp * p, d, margin, len);
-      if (hit.hit && hit.normal.dot(d) < 0) return true;
-    }
-    return false;
+    const float len = (to - p).norm();
+    return len > margin && foundOnPath(p, (to - p) / len, margin, len);
   };
   for (size_t i = 0; i < mp.size(); ++i) {
     Vec3 emitter = Vec3::Zero();
