@@ -26,8 +26,8 @@ SLOW_MATCHING+=":LearnedDescriptor.ClusterTooLarge*:LearnedDescriptor.GuidedSamp
 # incidence-weighted fitness stay covered by FitnessCountsOnlyWhatTheSheetLit and SteepFaces*
 SLOW_MATCHING+=":ModelMatching.ABracketOnItsSide*:ModelMatching.APartSplit*:ModelMatching.RefineOnASecondScan"
 SLOW_MATCHING+=":ModelMatching.MixedEdgePoints*:ModelMatching.SurfaceTheScan*"
-# the second look's shading and a leftover's own second look: APartShadedByAFoundPartIsLookedAtAgain
-# and TwoDetectionsThatWouldShareSpace* stay and cover the same code
+# 40-100 s each under the sanitizers: the second look's shading stays covered by
+# APartShadedByAFoundPartIsLookedAtAgain, the rounds of locate() by every matching test
 SLOW_MATCHING+=":ModelMatching.ThreeTouching*:ModelMatching.APartShadedByAFoundPartIsFoundOn*"
 filter() {
   [ "${SANITIZE_ALL:-0}" = 1 ] && return 0
