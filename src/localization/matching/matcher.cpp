@@ -748,7 +748,7 @@ void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::s
     PartDetection a = d;
     a.unseen = unseen;
     a.fitness = std::max(fitness, d.fitness);
-    a.score = fitness * (cfg.min_coverage > 0 ? a.coverage : 1.0);
+    a.score = a.fitness * (cfg.min_coverage > 0 ? a.coverage : 1.0);
     look.take(i, a, m);
   }
   st.unseen_second_look += look.finish();
