@@ -84,6 +84,10 @@ struct MatchingConfig {
   /// on the distance field like a PPF vote. 0: off.
   int rest_candidates = 0;
   double rest_yaw_step = 0.2617993877991494;  ///< rad (15°)
+  /// Rest poses are also laid with their upward faces' ends on the cluster's ends along its
+  /// major axis, where the cluster reaches farther along it than rest_end_ratio times those
+  /// faces (parts touching in one cluster: its centre lies between them). 0: off.
+  double rest_end_ratio = 1.2;
   double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
   int icp_iterations = 40;
   double icp_max_points = 4000;    ///< scene points used by the final ICP (thinned evenly above this)

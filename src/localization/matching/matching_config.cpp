@@ -101,6 +101,8 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   if (c.rest_candidates < 0 || c.rest_candidates > 64) m.fail("rest_candidates", "must be in [0, 64] (0: off)");
   c.rest_yaw_step = m.getDouble("rest_yaw_step", c.rest_yaw_step);
   if (!(c.rest_yaw_step >= 0.01 && c.rest_yaw_step <= M_PI)) m.fail("rest_yaw_step", "must be in [0.01, pi] rad");
+  c.rest_end_ratio = m.getDouble("rest_end_ratio", c.rest_end_ratio);
+  if (!(c.rest_end_ratio == 0 || c.rest_end_ratio >= 1)) m.fail("rest_end_ratio", "must be 0 (off) or >= 1");
   positive("icp_spacing", c.icp_spacing);
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);

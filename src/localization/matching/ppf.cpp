@@ -266,7 +266,9 @@ namespace {
 /// the sheet reached (the fan's edge, the sweep's end: a tall part's top near the workspace's
 /// end) and spans less than kPartialView of those faces' width along it, the faces are also laid
 /// with their other end on the cluster's other end: centred, a partly lit face is centimetres
-/// off, and a short ICP on a flat face does not slide it back.
+/// off, and a short ICP on a flat face does not slide it back. Where the cluster reaches farther
+/// along its major axis than rest_end_ratio times those faces (parts touching in one cluster,
+/// whose centre lies between them), the faces are also laid with each end on the cluster's end.
 std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
                                        const Eigen::Vector4f& support) {
   std::vector<Hypothesis> out;
@@ -343,6 +345,13 @@ std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::M
       std::vector<Eigen::Vector2f> shifts{Eigen::Vector2f::Zero()};
       for (size_t a = 0; a < 2 && !outline.empty(); ++a) {
         const float m_hi = reach(outline, axes[a]), m_lo = -reach(outline, -axes[a]);
+        // axes[1]: the major axis (the solver's eigenvalues ascend); a cluster longer than the
+        // part along it may hold it at either end (touching parts)
+        if (a == 1 && cfg.rest_end_ratio > 0 && c_hi[a] - c_lo[a] > cfg.rest_end_ratio * (m_hi - m_lo)) {
+          shifts.push_back((c_lo[a] - m_lo) * axes[a]);
+          shifts.push_back((c_hi[a] - m_hi) * axes[a]);
+          continue;
+        }
         if (cut_hi[a] == cut_lo[a] || c_hi[a] - c_lo[a] >= kPartialView * (m_hi - m_lo)) continue;
         // the end the sheet did reach past is the part's own
         shifts.push_back(cut_hi[a] ? (c_lo[a] - m_lo) * axes[a] : (c_hi[a] - m_hi) * axes[a]);
