@@ -345,16 +345,18 @@ std::vector<Hypothesis> restHypotheses(const SceneData& s, const ModelMatcher::M
       std::vector<Eigen::Vector2f> shifts{Eigen::Vector2f::Zero()};
       for (size_t a = 0; a < 2 && !outline.empty(); ++a) {
         const float m_hi = reach(outline, axes[a]), m_lo = -reach(outline, -axes[a]);
+        // the faces' low or high end along the axis on the cluster's
+        auto endOn = [&](bool low) { return Eigen::Vector2f((low ? c_lo[a] - m_lo : c_hi[a] - m_hi) * axes[a]); };
         // axes[1]: the major axis (the solver's eigenvalues ascend); a cluster longer than the
         // part along it may hold it at either end (touching parts)
         if (a == 1 && cfg.rest_end_ratio > 0 && c_hi[a] - c_lo[a] > cfg.rest_end_ratio * (m_hi - m_lo)) {
-          shifts.push_back((c_lo[a] - m_lo) * axes[a]);
-          shifts.push_back((c_hi[a] - m_hi) * axes[a]);
+          shifts.push_back(endOn(true));
+          shifts.push_back(endOn(false));
           continue;
         }
         if (cut_hi[a] == cut_lo[a] || c_hi[a] - c_lo[a] >= kPartialView * (m_hi - m_lo)) continue;
         // the end the sheet did reach past is the part's own
-        shifts.push_back(cut_hi[a] ? (c_lo[a] - m_lo) * axes[a] : (c_hi[a] - m_hi) * axes[a]);
+        shifts.push_back(endOn(cut_hi[a]));
       }
       for (const Eigen::Vector2f& d : shifts) {
         Hypothesis h;
