@@ -74,6 +74,15 @@ if grep -q "warning: .*downsampled to" "$WORK/mem60.log" && [ "$(field "$WORK/me
 else
   fail "downsampling to the memory limit: $(tail -2 "$WORK/mem60.log")"
 fi
+# a part that is not there: exit 3, and each refused pose names the test that refused it
+"$BIN" --model "$B/bun045.ply" --scene "$DATA/pcl/milk_cartoon_all_small_clorox.pcd" --json "$WORK/absent.json" >"$WORK/absent.log" 2>&1
+rc=$?
+why=$(/usr/bin/python3 -c 'import json,sys; r=json.load(open(sys.argv[1])).get("rejected") or [{}]; print(r[0].get("refused_by", ""))' "$WORK/absent.json" 2>/dev/null)
+if [ $rc -eq 3 ] && grep -q "the best poses refused, and why:" "$WORK/absent.log" && echo "$why" | grep -Eq '(> max_|< min_)[a-z_]+ '; then
+  passed=$((passed + 1))
+else
+  fail "absent part (exit $rc, refused_by '$why'): $(tail -2 "$WORK/absent.log")"
+fi
 # a corrupt scene: an error naming it, exit 1
 head -c 300 "$DATA/pcl/milk.pcd" >"$WORK/broken.pcd"
 "$BIN" --model "$DATA/pcl/milk.pcd" --scene "$WORK/broken.pcd" >"$WORK/broken.log" 2>&1

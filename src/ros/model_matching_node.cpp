@@ -244,6 +244,8 @@ class ModelMatching {
     diag_.processed(stats.seconds);
     diag_.set("parts found in the last scan", std::to_string(dets.size()));
     for (const auto& w : stats.warnings) out->warnings.push_back(w);
+    // which test refused what each unexplained cluster looked most like (rosconsole debug level)
+    for (const auto& line : cellsight::refusedClusters(dets, stats)) ROS_DEBUG("model_matching: %s", line.c_str());
     std::vector<cellsight::NamedInstance> current;
     for (const cellsight::PartDetection& d : dets) current.push_back({d.model, "", d.pose.translation()});
     std::vector<std::string> names;

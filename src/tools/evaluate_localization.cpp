@@ -159,8 +159,8 @@ Trial runTrial(const ModelMatcher& m, const ModelLibrary& lib, const std::string
     }
     for (const auto& d : st.rejected) {
       const PoseError e = d.model == id ? poseError(lib.model(id).info, m.centroid(id), d.pose, truth) : PoseError{-1, -1};
-      std::fprintf(stderr, "  rejected %s: %.1f mm %.1f deg fitness %.2f coverage %.2f rmse %.3f mm\n", d.model.c_str(),
-                   e.translation * 1e3, e.rotation / kDeg, d.fitness, d.coverage, d.rmse * 1e3);
+      std::fprintf(stderr, "  rejected %s: %.1f mm %.1f deg fitness %.2f coverage %.2f rmse %.3f mm (%s)\n", d.model.c_str(),
+                   e.translation * 1e3, e.rotation / kDeg, d.fitness, d.coverage, d.rmse * 1e3, d.refused_by.c_str());
     }
   }
   return t;
@@ -458,6 +458,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
                                  {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through}, {"unseen", r.unseen},
                                  {"continuation", r.continuation}, {"cluster", r.cluster},       {"t_err_mm", e.translation * 1e3},
                                  {"r_err_deg", e.rotation / kDeg},
+                                 {"refused_by", r.refused_by},
                                  {"pose", cellsight_tools::poseToJson(r.pose)}};
       }
     }
@@ -486,6 +487,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
                               {"see_through", r.see_through},
                               {"unseen", r.unseen},
                               {"continuation", r.continuation},
+                              {"refused_by", r.refused_by},
                               {"right", t_err <= o.max_t_mm * 1e-3 && r_err <= o.max_r_deg * kDeg}});
   }
   if (on_object) describeScanPoints(scene, lib, cloud, *on_object, dets, &sj);

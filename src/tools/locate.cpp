@@ -213,9 +213,13 @@ int main(int argc, char** argv) {
                   t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w(), d.fitness, d.rmse * 1e3, st.seconds, cfg.voxel * 1e3,
                   matching_file.empty() ? "scaled defaults" : matching_file.c_str());
     } else {
-      std::printf("not found (%.2f s, voxel %.1f mm); best rejected:", st.seconds, cfg.voxel * 1e3);
-      for (const auto& r : st.rejected) std::printf(" fitness %.3f rmse %.3f mm;", r.fitness, r.rmse * 1e3);
-      std::printf("\n");
+      std::printf("not found (%.2f s, voxel %.1f mm)%s\n", st.seconds, cfg.voxel * 1e3,
+                  st.rejected.empty() ? "" : "; the best poses refused, and why:");
+      j["rejected"] = json::array();
+      for (const auto& r : st.rejected) {
+        std::printf("  fitness %.3f, coverage %.3f, rmse %.3f mm: %s\n", r.fitness, r.coverage, r.rmse * 1e3, r.refused_by.c_str());
+        j["rejected"].push_back({{"fitness", r.fitness}, {"coverage", r.coverage}, {"rmse_mm", r.rmse * 1e3}, {"refused_by", r.refused_by}});
+      }
     }
     if (!truth_file.empty()) {
       std::ifstream tf(truth_file);

@@ -510,6 +510,47 @@ TEST(ModelMatching, APartFittedOntoALargerObjectsFaceIsRefused) {
   EXPECT_TRUE(on.empty());
 }
 
+// A refused pose names every acceptance test it failed, its figure against the limit, in a fixed
+// order; a pose that passes them has no reason, and a pair that reached no pose says so.
+TEST(ModelMatching, ARefusedPoseNamesEveryTestItFailed) {
+  MatchingConfig c;
+  c.min_fitness = 0.3;
+  c.min_coverage = 0.6;
+  c.max_rmse = 0.00016;
+  c.max_see_through = 0.005;
+  c.max_unseen = 0.045;
+  c.max_continuation = 0.01;
+  PartDetection d;
+  d.fitness = 0.963, d.coverage = 1.0, d.rmse = 0.000169, d.score = 0.963;
+  EXPECT_EQ(refusalReasons(d, c), "rmse 0.169 mm > max_rmse 0.160 mm");
+  d.fitness = 0.2, d.coverage = 0.5, d.see_through = 0.1, d.unseen = 0.05, d.continuation = 0.02, d.score = 0.1;
+  EXPECT_EQ(refusalReasons(d, c),
+            "fitness 0.200 < min_fitness 0.300; coverage 0.500 < min_coverage 0.600; rmse 0.169 mm > max_rmse 0.160 mm; "
+            "see-through 0.100 > max_see_through 0.005; unseen 0.050 > max_unseen 0.045; continuation 0.0200 > max_continuation 0.0100");
+  c.max_continuation = 1.0;  // off: never a reason
+  d = PartDetection();
+  d.fitness = 0.9, d.coverage = 0.9, d.rmse = 0.0001, d.continuation = 0.5, d.score = 0.81;
+  EXPECT_EQ(refusalReasons(d, c), "");
+  EXPECT_EQ(refusalReasons(PartDetection(), c), "no pose fitted");
+  // per cluster without a detection, its best refused pose that fitted something
+  MatchStats st;
+  auto refused = [&](int cluster, const char* model, double fitness, const char* why) {
+    PartDetection r;
+    r.cluster = cluster, r.model = model, r.fitness = fitness, r.coverage = 0.8, r.score = fitness * 0.8, r.refused_by = why;
+    st.rejected.push_back(r);
+  };
+  refused(0, "holder", 0.21, "fitness 0.210 < min_fitness 0.300");
+  refused(0, "bracket", 0.12, "fitness 0.120 < min_fitness 0.300");
+  refused(1, "housing", 0.9, "unseen 0.050 > max_unseen 0.045");  // cluster 1 has a part
+  st.rejected.push_back(PartDetection());                          // a pair that fitted nothing
+  st.rejected.back().cluster = 2;
+  PartDetection found;
+  found.cluster = 1;
+  const std::vector<std::string> lines = refusedClusters({found}, st);
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_EQ(lines[0], "cluster 0: no part accepted; the best refused, holder (fitness 0.210, coverage 0.800): fitness 0.210 < min_fitness 0.300");
+}
+
 // A holder lying on an arm shows the camera its upper arm's outer face, 30 x 32 mm: turned 90
 // degrees about the vertical the face fits within what the scanner loses at its edges, and the
 // turned pose explains the strip seen through the mouth as the channel's open end, scoring
@@ -642,6 +683,8 @@ TEST(ModelMatching, APartTheCameraSawThroughIsRefused) {
   EXPECT_TRUE(m.locate({view}, {"holder"}, &st, nullptr, &table, &through).empty());
   ASSERT_FALSE(st.rejected.empty());
   EXPECT_GT(st.rejected[0].see_through, 0.3);
+  // the refused pose names the test that refused it (cellsight_locate prints it, the evaluation's JSON holds it)
+  EXPECT_NE(st.rejected[0].refused_by.find("> max_see_through 0.005"), std::string::npos) << st.rejected[0].refused_by;
   // broken support points (NaN, one 10 km away) neither crash nor blow up the map: it is
   // coarsened to at most 16 M cells, and the part is still found
   auto broken = seen;

@@ -253,7 +253,16 @@ struct PartDetection {
   std::string matcher;   ///< the coarse stage: "ppf", "ransac" or "fgr"
   bool refined = false;  ///< refine() moved it to its pose on a second scan
   double coarse_seconds = 0, refine_seconds = 0;  ///< CPU time of the stages for this pair
+  /// A pose in MatchStats::rejected: the acceptance tests it failed, with its figure and the
+  /// limit, as refusalReasons() words them (empty for a pose that was accepted).
+  std::string refused_by;
 };
+
+/// The acceptance tests `d` fails under `c`'s thresholds, e.g. "rmse 0.169 mm > max_rmse
+/// 0.160 mm; fitness 0.21 < min_fitness 0.30", in the order fitness, coverage, rmse,
+/// see-through, unseen, continuation; "no pose fitted" when the pair reached no scored pose.
+/// Empty when every test passes.
+std::string refusalReasons(const PartDetection& d, const MatchingConfig& c);
 
 struct MatchStats {
   double seconds = 0;
@@ -280,6 +289,12 @@ struct MatchStats {
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
 };
+
+/// One line per cluster of a locate() call that no detection in `found` came from and whose
+/// best refused pose (highest score in `stats.rejected`) had a model fitted: "cluster 3: no part
+/// accepted; the best refused, holder (fitness 0.210, coverage 0.800): fitness 0.210 <
+/// min_fitness 0.300". Clusters whose every pair fitted nothing are left out.
+std::vector<std::string> refusedClusters(const std::vector<PartDetection>& found, const MatchStats& stats);
 
 /// Symmetry-aware pose error about the model centroid: translation of the centroid (m) and
 /// rotation (rad; none: full, discrete: best of the n equivalent rotations, axial: angle between

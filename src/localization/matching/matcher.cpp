@@ -1004,7 +1004,10 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
         const PartDetection& d = w.per_model[m];
         st.coarse_seconds += d.coarse_seconds;
         st.refine_seconds += d.refine_seconds;
-        if (!d.model.empty() && !accepted(d, wcfg[wi])) st.rejected.push_back(d);
+        if (!d.model.empty() && !accepted(d, wcfg[wi])) {
+          st.rejected.push_back(d);
+          st.rejected.back().refused_by = refusalReasons(d, wcfg[wi]);
+        }
       }
       const PartDetection* best = best_of[wi] < 0 ? nullptr : &chosen[wi];
       const size_t best_m = best_of[wi] < 0 ? 0 : static_cast<size_t>(best_of[wi]);

@@ -2,7 +2,10 @@
 // symmetry-aware pose error and canonical pose.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
+#include <map>
+#include <string>
 
 #include "matching_internal.hpp"
 
@@ -342,6 +345,45 @@ Eigen::Isometry3d canonicalPose(const ModelInfo& info, const Eigen::Vector3d& ce
       out.linear().setIdentity();
       out.translation() = pose * centroid - centroid;
       break;
+  }
+  return out;
+}
+
+
+std::string refusalReasons(const PartDetection& d, const MatchingConfig& c) {
+  if (d.score <= 0 && d.fitness <= 0 && d.coverage <= 0) return "no pose fitted";
+  std::string out;
+  char buf[128];
+  auto add = [&](bool fails, const char* fmt, double value, double limit) {
+    if (!fails) return;
+    std::snprintf(buf, sizeof(buf), fmt, value, limit);
+    out += (out.empty() ? "" : "; ") + std::string(buf);
+  };
+  add(d.fitness < c.min_fitness, "fitness %.3f < min_fitness %.3f", d.fitness, c.min_fitness);
+  add(d.coverage < c.min_coverage, "coverage %.3f < min_coverage %.3f", d.coverage, c.min_coverage);
+  add(d.rmse > c.max_rmse, "rmse %.3f mm > max_rmse %.3f mm", d.rmse * 1e3, c.max_rmse * 1e3);
+  add(d.see_through > c.max_see_through, "see-through %.3f > max_see_through %.3f", d.see_through, c.max_see_through);
+  add(d.unseen > c.max_unseen, "unseen %.3f > max_unseen %.3f", d.unseen, c.max_unseen);
+  add(c.max_continuation < 1 && d.continuation > c.max_continuation, "continuation %.4f > max_continuation %.4f",
+      d.continuation, c.max_continuation);
+  if (out.empty() && d.score <= 0) out = "score 0 (fitness x coverage)";
+  return out;
+}
+
+std::vector<std::string> refusedClusters(const std::vector<PartDetection>& found, const MatchStats& stats) {
+  std::map<int, const PartDetection*> best;
+  for (const auto& r : stats.rejected) {
+    if (r.cluster < 0 || r.score <= 0 || r.refused_by.empty()) continue;
+    if (std::any_of(found.begin(), found.end(), [&](const PartDetection& d) { return d.cluster == r.cluster; })) continue;
+    const PartDetection*& b = best[r.cluster];
+    if (!b || r.score > b->score) b = &r;
+  }
+  std::vector<std::string> out;
+  char buf[160];
+  for (const auto& [cluster, r] : best) {
+    std::snprintf(buf, sizeof(buf), "cluster %d: no part accepted; the best refused, %s (fitness %.3f, coverage %.3f): ", cluster,
+                  r->model.c_str(), r->fitness, r->coverage);
+    out.push_back(buf + r->refused_by);
   }
   return out;
 }
