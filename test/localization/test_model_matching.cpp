@@ -532,6 +532,8 @@ TEST(ModelMatching, ARefusedPoseNamesEveryTestItFailed) {
   d.fitness = 0.9, d.coverage = 0.9, d.rmse = 0.0001, d.continuation = 0.5, d.score = 0.81;
   EXPECT_EQ(refusalReasons(d, c), "");
   EXPECT_EQ(refusalReasons(PartDetection(), c), "no pose fitted");
+  d.rmse = NAN;  // a figure that is not a number fails its test, as the acceptance refuses it
+  EXPECT_EQ(refusalReasons(d, c), "rmse nan mm > max_rmse 0.160 mm");
   // per cluster without a detection, its best refused pose that fitted something
   MatchStats st;
   auto refused = [&](int cluster, const char* model, double fitness, const char* why) {

@@ -264,12 +264,29 @@ bool offSupport(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, c
   return cfg.max_support_gap > 0 && -below > static_cast<float>(cfg.max_support_gap) + slack;
 }
 
+namespace {
+/// The acceptance tests after the score's, in order: `fail(wording, figure, limit)` for each that
+/// `d` fails (a NaN figure fails). accepted() and refusalReasons() both read this one list.
+template <class Fail>
+void failedTests(const PartDetection& d, const MatchingConfig& cfg, double min_fitness, Fail&& fail) {
+  if (!(d.fitness >= min_fitness)) fail("fitness %.3f < min_fitness %.3f", d.fitness, min_fitness);
+  if (!(d.coverage >= cfg.min_coverage)) fail("coverage %.3f < min_coverage %.3f", d.coverage, cfg.min_coverage);
+  if (!(d.rmse <= cfg.max_rmse)) fail("rmse %.3f mm > max_rmse %.3f mm", d.rmse * 1e3, cfg.max_rmse * 1e3);
+  if (!(d.see_through <= cfg.max_see_through))
+    fail("see-through %.3f > max_see_through %.3f", d.see_through, cfg.max_see_through);
+  if (!(d.unseen <= cfg.max_unseen)) fail("unseen %.3f > max_unseen %.3f", d.unseen, cfg.max_unseen);
+  if (!(cfg.max_continuation >= 1 || d.continuation <= cfg.max_continuation))
+    fail("continuation %.4f > max_continuation %.4f", d.continuation, cfg.max_continuation);
+}
+}  // namespace
+
 bool accepted(const PartDetection& d, const MatchingConfig& cfg) { return accepted(d, cfg, cfg.min_fitness); }
 
 bool accepted(const PartDetection& d, const MatchingConfig& cfg, double min_fitness) {
-  return d.score > 0 && d.fitness >= min_fitness && d.coverage >= cfg.min_coverage && d.rmse <= cfg.max_rmse &&
-         d.see_through <= cfg.max_see_through && d.unseen <= cfg.max_unseen &&
-         (cfg.max_continuation >= 1 || d.continuation <= cfg.max_continuation);
+  if (!(d.score > 0)) return false;
+  bool ok = true;
+  failedTests(d, cfg, min_fitness, [&](const char*, double, double) { ok = false; });
+  return ok;
 }
 
 }  // namespace matching_detail
@@ -349,24 +366,15 @@ Eigen::Isometry3d canonicalPose(const ModelInfo& info, const Eigen::Vector3d& ce
   return out;
 }
 
-
 std::string refusalReasons(const PartDetection& d, const MatchingConfig& c) {
   if (d.score <= 0 && d.fitness <= 0 && d.coverage <= 0) return "no pose fitted";
   std::string out;
   char buf[128];
-  auto add = [&](bool fails, const char* fmt, double value, double limit) {
-    if (!fails) return;
-    std::snprintf(buf, sizeof(buf), fmt, value, limit);
+  matching_detail::failedTests(d, c, c.min_fitness, [&](const char* fmt, double figure, double limit) {
+    std::snprintf(buf, sizeof(buf), fmt, figure, limit);
     out += (out.empty() ? "" : "; ") + std::string(buf);
-  };
-  add(d.fitness < c.min_fitness, "fitness %.3f < min_fitness %.3f", d.fitness, c.min_fitness);
-  add(d.coverage < c.min_coverage, "coverage %.3f < min_coverage %.3f", d.coverage, c.min_coverage);
-  add(d.rmse > c.max_rmse, "rmse %.3f mm > max_rmse %.3f mm", d.rmse * 1e3, c.max_rmse * 1e3);
-  add(d.see_through > c.max_see_through, "see-through %.3f > max_see_through %.3f", d.see_through, c.max_see_through);
-  add(d.unseen > c.max_unseen, "unseen %.3f > max_unseen %.3f", d.unseen, c.max_unseen);
-  add(c.max_continuation < 1 && d.continuation > c.max_continuation, "continuation %.4f > max_continuation %.4f",
-      d.continuation, c.max_continuation);
-  if (out.empty() && d.score <= 0) out = "score 0 (fitness x coverage)";
+  });
+  if (out.empty() && !(d.score > 0)) out = "score 0 (fitness x coverage)";
   return out;
 }
 
