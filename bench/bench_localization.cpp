@@ -84,8 +84,9 @@ struct Case {
 
 /// Per model id of the real library: its sizes' scale and sensor (the parts: 1 and kEye).
 struct RealModel {
-  double scale = 1, spacing = 0;
+  double scale = 1;
   Eigen::Vector3f eye = kEye;
+  MatchingConfig ours;  ///< our settings: the defaults scaled to the model and its scene
 };
 std::map<std::string, RealModel> g_real;
 double scaleOf(const std::string& id) { return g_real.count(id) ? g_real.at(id).scale : 1.0; }
@@ -296,9 +297,9 @@ std::vector<Case> realCases(ModelLibrary* lib, json* described) {
   // sizes as cellsight_locate scales its defaults: voxel = max(diagonal / 50, 2 x spacing)
   auto addModel = [&](const std::string& id, const ScanCloud& scene, const Eigen::Vector3f& eye) {
     RealModel r;
-    r.spacing = medianPointSpacing(scene);
     r.eye = eye;
-    r.scale = std::max(lib->model(id).bounds.diagonal().norm() / 50.0, 2 * r.spacing) / kVoxel;
+    r.ours = scaledMatchingConfig(MatchingConfig(), lib->model(id).bounds.diagonal().norm(), scene);
+    r.scale = r.ours.voxel / kVoxel;
     g_real[id] = r;
   };
   auto addCase = [&](const std::string& name, const std::string& id, ScanCloud scene, const Eigen::Isometry3d& truth,
@@ -384,8 +385,7 @@ int main(int argc, char** argv) {
       std::shared_ptr<ModelMatcher> parts;
       for (const std::string& id : l->ids()) {
         const bool real = g_real.count(id) > 0;
-        MatchingConfig cfg = real ? scaledMatchingConfig(MatchingConfig(), l->model(id).bounds.diagonal().norm(), g_real.at(id).spacing)
-                                  : loadMatchingConfig(kRoot + "/config/matching.yaml");
+        MatchingConfig cfg = real ? g_real.at(id).ours : loadMatchingConfig(kRoot + "/config/matching.yaml");
         cfg.viewpoint = real ? g_real.at(id).eye : kEye;
         cfg.coarse = coarse;
         cfg.threads = 1;

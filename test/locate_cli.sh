@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # cellsight_locate on real data, as a user would run it, with no settings file: the Stanford bunny
-# (PLY clouds, model and scene), the same scene rewritten with double coordinates, the PCL milk
-# carton (PCD), the UWA parasaurolophus mesh in millimetres; errors against the shipped truth
-# where there is one; a memory limit that must refuse and one that must downsample; a corrupt
-# file. Usage: locate_cli.sh <devel lib folder> <work folder>
+# (PLY clouds, model and scene), the same scene rewritten with double coordinates and scattered
+# by 1 mm, the PCL milk carton (PCD), the UWA parasaurolophus mesh in millimetres; errors against
+# the shipped truth where there is one; parts that are not in the scan; a memory limit that must
+# refuse and one that must downsample; a corrupt file. Usage: locate_cli.sh <devel lib folder> <work folder>
 set -uo pipefail
 BIN=$1/cellsight_locate
 WORK=$2
@@ -52,6 +52,20 @@ with open(sys.argv[2], "wb") as f:
 PY
 check_found bunny_double 2 1 --model "$B/bun045.ply" --scene "$WORK/bun000_double.ply" --model-sensor 0 0 1 \
   --viewpoint 0 0 1 --truth "$B/T_bun045_to_bun000.txt"
+# the same scene scattered by 1 mm (Gaussian, each axis): the RMSE limit follows the scan's scatter
+/usr/bin/python3 - "$B/bun000.ply" "$WORK/bun000_noisy.ply" <<'PY'
+import random, sys
+lines = open(sys.argv[1]).read().split("\n")
+n = next(int(l.split()[2]) for l in lines if l.startswith("element vertex"))
+body = lines[lines.index("end_header") + 1:]
+rnd = random.Random(7)
+with open(sys.argv[2], "w") as f:
+    f.write("ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\nend_header\n" % n)
+    for l in body[:n]:
+        f.write("%.6f %.6f %.6f\n" % tuple(float(c) + rnd.gauss(0, 0.001) for c in l.split()[:3]))
+PY
+check_found bunny_noisy 2 1 --model "$B/bun045.ply" --scene "$WORK/bun000_noisy.ply" --model-sensor 0 0 1 \
+  --viewpoint 0 0 1 --truth "$B/T_bun045_to_bun000.txt"
 printf '1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n' >"$WORK/identity.txt"
 check_found milk 5 2 --model "$DATA/pcl/milk.pcd" --scene "$DATA/pcl/milk_cartoon_all_small_clorox.pcd" \
   --truth "$WORK/identity.txt"
@@ -82,6 +96,14 @@ if [ $rc -eq 3 ] && grep -q "the best poses refused, and why:" "$WORK/absent.log
   passed=$((passed + 1))
 else
   fail "absent part (exit $rc, refused_by '$why'): $(tail -2 "$WORK/absent.log")"
+fi
+# the milk carton in the bunny scan: not there; its best pose leaves more than the scan's scatter allows
+"$BIN" --model "$DATA/pcl/milk.pcd" --scene "$B/bun000.ply" --json "$WORK/absent_milk.json" >"$WORK/absent_milk.log" 2>&1
+rc=$?
+if [ $rc -eq 3 ] && grep -q "rmse .* mm > max_rmse" "$WORK/absent_milk.log"; then
+  passed=$((passed + 1))
+else
+  fail "milk carton in the bunny scan (exit $rc): $(head -2 "$WORK/absent_milk.log")"
 fi
 # a corrupt scene: an error naming it, exit 1
 head -c 300 "$DATA/pcl/milk.pcd" >"$WORK/broken.pcd"

@@ -18,6 +18,8 @@
 #include <pcl/io/ply_io.h>
 #include <pcl/point_types.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cstdio>
 #include <stdexcept>
@@ -105,6 +107,37 @@ double medianPointSpacing(const ScanCloud& cloud, size_t samples) {
   if (d.empty()) return 0.0;
   std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
   return d[d.size() / 2];
+}
+
+double medianPlaneResidual(const ScanCloud& cloud, double radius, size_t samples) {
+  if (!(radius > 0) || cloud.size() < 3) return 0.0;
+  auto pc = toPclXyzi<pcl::PointXYZI>(cloud);
+  pcl::KdTreeFLANN<pcl::PointXYZI> tree;
+  tree.setInputCloud(pc);
+  const size_t n = std::min(samples, cloud.size());
+  std::vector<double> r;
+  r.reserve(n);
+  std::vector<int> idx;
+  std::vector<float> sq;
+  for (size_t s = 0; s < n; ++s) {
+    const size_t i = s * cloud.size() / n;
+    if (tree.radiusSearch((*pc)[i], radius, idx, sq) < 6) continue;
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (int j : idx) mean += cloud.points[j].cast<double>();
+    mean /= idx.size();
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (int j : idx) {
+      const Eigen::Vector3d d = cloud.points[j].cast<double>() - mean;
+      cov += d * d.transpose();
+    }
+    const double smallest =
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov / idx.size(), Eigen::EigenvaluesOnly).eigenvalues()(0);
+    // the plane is fitted to the same points: n - 3 degrees of freedom are left
+    r.push_back(std::sqrt(std::max(0.0, smallest) * idx.size() / (idx.size() - 3.0)));
+  }
+  if (r.empty()) return 0.0;
+  std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
+  return r[r.size() / 2];
 }
 
 void estimateNormals(ScanCloud& cloud, int k, const Eigen::Vector3f& viewpoint) {

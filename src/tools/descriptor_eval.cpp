@@ -257,8 +257,7 @@ int runDescriptorEvaluation(const DescriptorEvalOptions& o) {
         scaled = loadMatchingConfig(o.root + "/config/matching_uwa.yaml");
         scaled.feature_radius = 5 * scaled.voxel;
       } else {
-        scaled = scaledMatchingConfig(MatchingConfig(), real_lib->model(c.model).bounds.diagonal().norm(),
-                                      medianPointSpacing(c.scene));
+        scaled = scaledMatchingConfig(MatchingConfig(), real_lib->model(c.model).bounds.diagonal().norm(), c.scene);
       }
       json jc = {{"scene_points", c.scene.size()}, {"reference", c.reference_kind}, {"voxel_m", scaled.voxel}};
       for (size_t k = 0; k < methods.size(); ++k) {

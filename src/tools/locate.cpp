@@ -182,9 +182,16 @@ int main(int argc, char** argv) {
       lib->addCloudModel("model", model_cloud, vec3(model_sensor));
     }
     const double diagonal = lib->model("model").bounds.diagonal().norm();
-    const double spacing = medianPointSpacing(scene);
-    MatchingConfig cfg = matching_file.empty() ? scaledMatchingConfig(MatchingConfig(), diagonal, spacing)
+    ScanFigures scan;
+    MatchingConfig cfg = matching_file.empty() ? scaledMatchingConfig(MatchingConfig(), diagonal, scene, &scan)
                                                : loadMatchingConfig(matching_file);
+    if (!matching_file.empty()) scan = {medianPointSpacing(scene), medianPlaneResidual(scene, cfg.voxel)};
+    char settings[160];
+    if (matching_file.empty())
+      std::snprintf(settings, sizeof settings, "scaled defaults; max_rmse %.3f mm from the scan's scatter %.3f mm",
+                    cfg.max_rmse * 1e3, scan.noise * 1e3);
+    else
+      std::snprintf(settings, sizeof settings, "%s", matching_file.c_str());
     cfg.viewpoint = vec3(viewpoint);
     cfg.min_coverage = 0;  // a whole scan, not a cluster
     cfg.max_instances = 1;
@@ -195,9 +202,11 @@ int main(int argc, char** argv) {
               {"scene", scene_file},
               {"scene_points", scene.size()},
               {"model_diagonal_m", diagonal},
-              {"scene_spacing_m", spacing},
+              {"scene_spacing_m", scan.spacing},
+              {"scene_noise_m", scan.noise},
               {"settings", matching_file.empty() ? "defaults scaled to the part" : matching_file},
               {"voxel_m", cfg.voxel},
+              {"max_rmse_m", cfg.max_rmse},
               {"locate_seconds", st.seconds},
               {"found", !dets.empty()}};
     for (const auto& w : st.warnings) j["warnings"].push_back(w);
@@ -210,10 +219,9 @@ int main(int argc, char** argv) {
       j["rmse_mm"] = d.rmse * 1e3;
       std::printf("found: xyz %.6f %.6f %.6f m, quat (x y z w) %.6f %.6f %.6f %.6f; fitness %.3f, rmse %.3f mm, "
                   "%.2f s, voxel %.1f mm (%s)\n",
-                  t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w(), d.fitness, d.rmse * 1e3, st.seconds, cfg.voxel * 1e3,
-                  matching_file.empty() ? "scaled defaults" : matching_file.c_str());
+                  t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w(), d.fitness, d.rmse * 1e3, st.seconds, cfg.voxel * 1e3, settings);
     } else {
-      std::printf("not found (%.2f s, voxel %.1f mm)%s\n", st.seconds, cfg.voxel * 1e3,
+      std::printf("not found (%.2f s, voxel %.1f mm; %s)%s\n", st.seconds, cfg.voxel * 1e3, settings,
                   st.rejected.empty() ? "" : "; the best poses refused, and why:");
       j["rejected"] = json::array();
       for (const auto& r : st.rejected) {

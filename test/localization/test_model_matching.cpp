@@ -1196,7 +1196,8 @@ TEST(ModelMatchingRealData, PclMilkCartonInItsKinectScene) {
 }
 
 // The same two real cases with no hand-tuned settings: the defaults scaled to the model's size
-// and the scene's resolution (what cellsight_locate uses without --matching).
+// and the scene's resolution and scatter (what cellsight_locate uses without --matching); and the
+// milk carton searched in the bunny scan, where it is not.
 TEST(ModelMatchingRealData, ScaledDefaultsFindBunnyAndMilk) {
   const std::string root = std::string(CELLSIGHT_SOURCE_DIR) + "/../shared/data/pointclouds";
   if (!std::ifstream(root + "/pcl/milk.pcd") || !std::ifstream(root + "/stanford_bunny/bun045.ply"))
@@ -1217,7 +1218,7 @@ TEST(ModelMatchingRealData, ScaledDefaultsFindBunnyAndMilk) {
     lib->addCloudModel("m", loadCloud(c.model), c.sensor);
     const ScanCloud scene = loadCloud(c.scene);
     const double diagonal = lib->model("m").bounds.diagonal().norm();
-    MatchingConfig cfg = scaledMatchingConfig(MatchingConfig(), diagonal, medianPointSpacing(scene));
+    MatchingConfig cfg = scaledMatchingConfig(MatchingConfig(), diagonal, scene);
     cfg.viewpoint = c.sensor;
     cfg.min_coverage = 0;
     cfg.max_instances = 1;
@@ -1231,6 +1232,62 @@ TEST(ModelMatchingRealData, ScaledDefaultsFindBunnyAndMilk) {
     EXPECT_LT(e.translation, c.max_t) << c.model;
     EXPECT_LT(e.rotation, c.max_r_deg * M_PI / 180) << c.model;
   }
+  // a part that is not there: the milk carton in the bunny scan fits its best pose to 4.9 mm,
+  // which the voxel-scaled RMSE limit (0.75 voxel) let through; the scan's scatter does not
+  auto lib = std::make_shared<ModelLibrary>();
+  lib->addCloudModel("milk", loadCloud(root + "/pcl/milk.pcd"), Eigen::Vector3f::Zero());
+  const ScanCloud bunny = loadCloud(root + "/stanford_bunny/bun000.ply");
+  ScanFigures scan;
+  MatchingConfig cfg = scaledMatchingConfig(MatchingConfig(), lib->model("milk").bounds.diagonal().norm(), bunny, &scan);
+  cfg.min_coverage = 0;
+  cfg.max_instances = 1;
+  ModelMatcher m(lib, cfg);
+  MatchStats st;
+  EXPECT_TRUE(m.locate({bunny}, {}, &st).empty());
+  ASSERT_FALSE(st.rejected.empty());
+  std::printf("milk in bun000: refused (%s); scatter %.3f mm\n", st.rejected[0].refused_by.c_str(), scan.noise * 1e3);
+  EXPECT_NE(st.rejected[0].refused_by.find("> max_rmse"), std::string::npos);
+}
+
+namespace {
+
+/// A 20 x 20 cm plane sampled every millimetre, scattered along its normal by `sigma`.
+ScanCloud noisyPlane(double sigma) {
+  std::mt19937 rng(5);
+  std::normal_distribution<float> n(0.f, static_cast<float>(sigma));
+  ScanCloud c;
+  for (int i = 0; i < 200; ++i)
+    for (int j = 0; j < 200; ++j) c.append(Eigen::Vector3f(i * 1e-3f, j * 1e-3f, sigma > 0 ? n(rng) : 0.f), 1.f);
+  return c;
+}
+
+}  // namespace
+
+// The RMSE limit of the scaled settings follows the scan's scatter off its surface: twice it,
+// within [0.1, 0.5] voxel.
+TEST(ScaledSettings, RmseLimitFollowsTheScansScatter) {
+  const double diagonal = 0.1;  // voxel 2 mm (diagonal / 50; the spacing is 1 mm)
+  ScanFigures f;
+  MatchingConfig c = scaledMatchingConfig(MatchingConfig(), diagonal, noisyPlane(0), &f);
+  EXPECT_NEAR(c.voxel, 0.002, 1e-4);
+  EXPECT_NEAR(f.spacing, 0.001, 1e-5);
+  EXPECT_LT(f.noise, 1e-6);
+  EXPECT_NEAR(c.max_rmse, 0.1 * c.voxel, 1e-9);  // the floor
+  c = scaledMatchingConfig(MatchingConfig(), diagonal, noisyPlane(0.0003), &f);
+  EXPECT_NEAR(f.noise, 0.0003, 0.00006);  // ~12 points in the 2 mm ball, which cuts some of it off
+  EXPECT_NEAR(c.max_rmse, 2 * f.noise, 1e-9);
+  ScanCloud lattice;  // no surface at all: a 3-D lattice of 1 mm, 3 cm a side
+  for (int i = 0; i < 30; ++i)
+    for (int j = 0; j < 30; ++j)
+      for (int k = 0; k < 30; ++k) lattice.append(Eigen::Vector3f(i, j, k) * 1e-3f, 1.f);
+  c = scaledMatchingConfig(MatchingConfig(), diagonal, lattice, &f);
+  EXPECT_GT(2 * f.noise, 0.5 * c.voxel);
+  EXPECT_NEAR(c.max_rmse, 0.5 * c.voxel, 1e-9);  // the cap
+  // the estimate itself, with a ball well above the noise
+  EXPECT_NEAR(medianPlaneResidual(noisyPlane(0.0005), 0.006), 0.0005, 0.00005);
+  // too sparse for a plane (fewer than 6 neighbours in the ball): 0
+  EXPECT_EQ(medianPlaneResidual(noisyPlane(0), 0.0015), 0.0);
+  EXPECT_EQ(medianPlaneResidual(ScanCloud(), 0.01), 0.0);
 }
 
 namespace {

@@ -30,6 +30,12 @@ void estimateNormals(ScanCloud& cloud, int k, const Eigen::Vector3f& viewpoint);
 /// Median distance from a point to its nearest neighbour, over up to `samples` points spread
 /// evenly through the cloud (the scan's resolution); 0 for fewer than 2 points.
 double medianPointSpacing(const ScanCloud& cloud, size_t samples = 2000);
+/// The scan's scatter off its surface: the median, over up to `samples` points spread evenly
+/// through the cloud, of the RMS distance of the points within `radius` of a point from their
+/// best-fit plane, over n - 3 degrees of freedom (points with fewer than 6 such neighbours are
+/// skipped). It holds the sensor's noise and the surface's curvature at that scale, and reads low
+/// for noise near `radius` (the ball cuts it off). 0 when no point has 6 neighbours.
+double medianPlaneResidual(const ScanCloud& cloud, double radius, size_t samples = 2000);
 /// Removes non-finite points; returns how many were removed.
 size_t removeNonFinite(ScanCloud& cloud);
 

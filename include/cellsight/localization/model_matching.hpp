@@ -406,10 +406,21 @@ class ModelMatcher {
 /// Strict loader of config/matching.yaml (ConfigError names file and key).
 MatchingConfig loadMatchingConfig(const std::string& path);
 
-/// Settings for a part of any size, from `base` (tuned on the demo parts: 2 mm voxel for parts
-/// of 8-12 cm): the voxel becomes max(model diagonal / 50, 2 x the scene's point spacing) and every
-/// length setting (radii, steps, distances, tolerances, RMSE) scales with it; shares and counts
-/// stay. Used by cellsight_locate when no settings file is given.
-MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_diagonal, double scene_spacing);
+/// What scaledMatchingConfig measured of the scan.
+struct ScanFigures {
+  double spacing = 0;  ///< m, medianPointSpacing
+  double noise = 0;    ///< m, medianPlaneResidual within one scaled voxel
+};
+
+/// Settings for a part of any size in `scene`, from `base` (tuned on the demo parts: 2 mm voxel
+/// for parts of 8-12 cm): the voxel becomes max(model diagonal / 50, 2 x the scan's median point
+/// spacing) and every length setting (radii, steps, distances, tolerances) scales with it; shares
+/// and counts stay. The RMSE a pose may leave is taken from the scan instead: 2 x its scatter off
+/// the surface within one voxel (medianPlaneResidual), kept within [0.1, 0.5] x voxel. A true
+/// pose leaves about the scan's noise; a wrong one, the spread of whatever lies inside the ICP's
+/// correspondence distance (0.7-1.2 voxel on the real scans of docs/localization.md). Used by
+/// cellsight_locate when no settings file is given.
+MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_diagonal, const ScanCloud& scene,
+                                    ScanFigures* figures = nullptr);
 
 }  // namespace cellsight

@@ -26,8 +26,10 @@ void ModelMatcher::setAcceptance(const AcceptanceThresholds& t) {
   copyAcceptance(t, &config_);
 }
 
-MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_diagonal, double scene_spacing) {
+MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_diagonal, const ScanCloud& scene,
+                                    ScanFigures* figures) {
   if (!(model_diagonal > 0) || !std::isfinite(model_diagonal)) throw std::invalid_argument("model diagonal must be > 0");
+  const double scene_spacing = medianPointSpacing(scene);
   const double voxel = std::max(model_diagonal / 50.0, std::isfinite(scene_spacing) ? 2.0 * scene_spacing : 0.0);
   const double r = voxel / base.voxel;
   MatchingConfig c = base;
@@ -36,6 +38,9 @@ MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_dia
                     &c.fitness_radius, &c.max_rmse, &c.max_support_penetration, &c.max_support_gap,
                     &c.continuation_reach, &c.continuation_tolerance, &c.interpenetration_depth})
     *v *= r;
+  const double noise = medianPlaneResidual(scene, c.voxel);
+  c.max_rmse = std::clamp(2.0 * noise, 0.1 * c.voxel, 0.5 * c.voxel);
+  if (figures) *figures = {scene_spacing, noise};
   return c;
 }
 
