@@ -418,7 +418,7 @@ struct ScanFigures {
 /// and counts stay. The RMSE a pose may leave is taken from the scan instead: 2 x its scatter off
 /// the surface within one voxel (medianPlaneResidual), kept within [0.1, 0.5] x voxel. A true
 /// pose leaves about the scan's noise; a wrong one, the spread of whatever lies inside the ICP's
-/// correspondence distance (0.7-1.2 voxel on the real scans of docs/localization.md). Used by
+/// correspondence distance (0.7-1.4 voxel on the real scans of docs/localization.md). Used by
 /// cellsight_locate when no settings file is given.
 MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_diagonal, const ScanCloud& scene,
                                     ScanFigures* figures = nullptr);
