@@ -186,12 +186,13 @@ int main(int argc, char** argv) {
     MatchingConfig cfg = matching_file.empty() ? scaledMatchingConfig(MatchingConfig(), diagonal, scene, &scan)
                                                : loadMatchingConfig(matching_file);
     if (!matching_file.empty()) scan = {medianPointSpacing(scene), medianPlaneResidual(scene, cfg.voxel)};
-    char settings[160];
-    if (matching_file.empty())
-      std::snprintf(settings, sizeof settings, "scaled defaults; max_rmse %.3f mm from the scan's scatter %.3f mm",
-                    cfg.max_rmse * 1e3, scan.noise * 1e3);
-    else
-      std::snprintf(settings, sizeof settings, "%s", matching_file.c_str());
+    std::string settings = matching_file;
+    if (matching_file.empty()) {
+      char s[128];
+      std::snprintf(s, sizeof s, "scaled defaults; max_rmse %.3f mm from the scan's scatter %.3f mm", cfg.max_rmse * 1e3,
+                    scan.noise * 1e3);
+      settings = s;
+    }
     cfg.viewpoint = vec3(viewpoint);
     cfg.min_coverage = 0;  // a whole scan, not a cluster
     cfg.max_instances = 1;
@@ -219,9 +220,9 @@ int main(int argc, char** argv) {
       j["rmse_mm"] = d.rmse * 1e3;
       std::printf("found: xyz %.6f %.6f %.6f m, quat (x y z w) %.6f %.6f %.6f %.6f; fitness %.3f, rmse %.3f mm, "
                   "%.2f s, voxel %.1f mm (%s)\n",
-                  t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w(), d.fitness, d.rmse * 1e3, st.seconds, cfg.voxel * 1e3, settings);
+                  t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w(), d.fitness, d.rmse * 1e3, st.seconds, cfg.voxel * 1e3, settings.c_str());
     } else {
-      std::printf("not found (%.2f s, voxel %.1f mm; %s)%s\n", st.seconds, cfg.voxel * 1e3, settings,
+      std::printf("not found (%.2f s, voxel %.1f mm; %s)%s\n", st.seconds, cfg.voxel * 1e3, settings.c_str(),
                   st.rejected.empty() ? "" : "; the best poses refused, and why:");
       j["rejected"] = json::array();
       for (const auto& r : st.rejected) {

@@ -35,7 +35,7 @@ MatchingConfig scaledMatchingConfig(const MatchingConfig& base, double model_dia
   MatchingConfig c = base;
   for (double* v : {&c.voxel, &c.normal_radius, &c.feature_radius, &c.ppf_sampling, &c.ppf_distance_step,
                     &c.inlier_distance, &c.icp_spacing, &c.icp_huber_floor, &c.icp_slack_range, &c.icp_slack_tolerance,
-                    &c.fitness_radius, &c.max_rmse, &c.max_support_penetration, &c.max_support_gap,
+                    &c.fitness_radius, &c.max_support_penetration, &c.max_support_gap,
                     &c.continuation_reach, &c.continuation_tolerance, &c.interpenetration_depth})
     *v *= r;
   const double noise = medianPlaneResidual(scene, c.voxel);
