@@ -9,6 +9,8 @@
 
 #include "ply_header.hpp"
 
+#include <pcl/common/centroid.h>
+#include <pcl/common/eigen.h>
 #include <pcl/features/normal_3d.h>
 #include <pcl/filters/statistical_outlier_removal.h>
 #include <pcl/io/pcd_io.h>
@@ -18,10 +20,10 @@
 #include <pcl/io/ply_io.h>
 #include <pcl/point_types.h>
 
-#include <Eigen/Eigenvalues>
-
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <limits>
 #include <stdexcept>
 
 #include "cellsight/common/errors.hpp"
@@ -42,6 +44,27 @@ pcl::PointCloud<PointT>::Ptr toPcl(const ScanCloud& c) {
     p.normal_z = has ? c.normals[i].z() : 0.f;
   }
   return out;
+}
+
+constexpr double kSkip = std::numeric_limits<double>::quiet_NaN();
+
+/// The median of value(tree, point) over up to `samples` points spread evenly through the cloud,
+/// `tree` holding the whole cloud; points whose value is kSkip (NaN) are left out; 0 when all are.
+template <class Value>
+double medianOverSpreadPoints(const ScanCloud& cloud, size_t samples, Value&& value) {
+  pcl::KdTreeFLANN<pcl::PointXYZI> tree;
+  tree.setInputCloud(toPclXyzi<pcl::PointXYZI>(cloud));
+  const auto& pc = *tree.getInputCloud();
+  const size_t n = std::min(samples, cloud.size());
+  std::vector<double> v;
+  v.reserve(n);
+  for (size_t k = 0; k < n; ++k) {
+    const double x = value(tree, pc[k * cloud.size() / n]);
+    if (!std::isnan(x)) v.push_back(x);
+  }
+  if (v.empty()) return 0.0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
 }
 
 ScanCloud fromPcl(const pcl::PointCloud<PointT>& pc, const std::string& frame, bool normals) {
@@ -92,52 +115,28 @@ size_t removeNonFinite(ScanCloud& c) {
 
 double medianPointSpacing(const ScanCloud& cloud, size_t samples) {
   if (cloud.size() < 2) return 0.0;
-  auto pc = toPclXyzi<pcl::PointXYZI>(cloud);
-  pcl::KdTreeFLANN<pcl::PointXYZI> tree;
-  tree.setInputCloud(pc);
-  const size_t n = std::min(samples, cloud.size());
-  std::vector<double> d;
-  d.reserve(n);
-  std::vector<int> idx(2);
+  pcl::Indices idx(2);
   std::vector<float> sq(2);
-  for (size_t k = 0; k < n; ++k) {
-    const size_t i = k * cloud.size() / n;
-    if (tree.nearestKSearch((*pc)[i], 2, idx, sq) == 2 && sq[1] > 0) d.push_back(std::sqrt(sq[1]));
-  }
-  if (d.empty()) return 0.0;
-  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
-  return d[d.size() / 2];
+  return medianOverSpreadPoints(cloud, samples, [&](const pcl::KdTreeFLANN<pcl::PointXYZI>& tree, const pcl::PointXYZI& p) {
+    return tree.nearestKSearch(p, 2, idx, sq) == 2 && sq[1] > 0 ? std::sqrt(sq[1]) : kSkip;
+  });
 }
 
 double medianPlaneResidual(const ScanCloud& cloud, double radius, size_t samples) {
   if (!(radius > 0) || cloud.size() < 3) return 0.0;
-  auto pc = toPclXyzi<pcl::PointXYZI>(cloud);
-  pcl::KdTreeFLANN<pcl::PointXYZI> tree;
-  tree.setInputCloud(pc);
-  const size_t n = std::min(samples, cloud.size());
-  std::vector<double> r;
-  r.reserve(n);
-  std::vector<int> idx;
+  pcl::Indices idx;
   std::vector<float> sq;
-  for (size_t s = 0; s < n; ++s) {
-    const size_t i = s * cloud.size() / n;
-    if (tree.radiusSearch((*pc)[i], radius, idx, sq) < 6) continue;
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (int j : idx) mean += cloud.points[j].cast<double>();
-    mean /= idx.size();
+  return medianOverSpreadPoints(cloud, samples, [&](const pcl::KdTreeFLANN<pcl::PointXYZI>& tree, const pcl::PointXYZI& p) {
+    const int n = tree.radiusSearch(p, radius, idx, sq);
+    if (n < 6) return kSkip;
     Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-    for (int j : idx) {
-      const Eigen::Vector3d d = cloud.points[j].cast<double>() - mean;
-      cov += d * d.transpose();
-    }
-    const double smallest =
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov / idx.size(), Eigen::EigenvaluesOnly).eigenvalues()(0);
+    Eigen::Vector4d mean = Eigen::Vector4d::Zero();
+    if (pcl::computeMeanAndCovarianceMatrix(*tree.getInputCloud(), idx, cov, mean) < 6) return kSkip;
+    Eigen::Vector3d eigenvalues;  // ascending
+    pcl::eigen33(cov, eigenvalues);
     // the plane is fitted to the same points: n - 3 degrees of freedom are left
-    r.push_back(std::sqrt(std::max(0.0, smallest) * idx.size() / (idx.size() - 3.0)));
-  }
-  if (r.empty()) return 0.0;
-  std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
-  return r[r.size() / 2];
+    return std::sqrt(std::max(0.0, eigenvalues(0)) * n / (n - 3.0));
+  });
 }
 
 void estimateNormals(ScanCloud& cloud, int k, const Eigen::Vector3f& viewpoint) {
