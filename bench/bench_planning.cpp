@@ -55,7 +55,7 @@ Scenario makeScenario(const Scene& scene, const AssemblyConfig& as, uint64_t see
         T.translation() += Eigen::Vector3d(0.015 * u(rng), 0.015 * u(rng), 0);
         T.linear() = Eigen::AngleAxisd(0.5 * u(rng), Eigen::Vector3d::UnitZ()).toRotationMatrix() * T.linear();
       }
-      s.parts.push_back({o.name, o.model, T});
+      s.parts.push_back({o.name, o.model, T, {}});
     }
     // parts (bounding circles of 45 mm) must not overlap
     bool ok = true;

@@ -152,10 +152,10 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
   rep.located = found.size();
   std::vector<LocatedPart> parts;
   std::map<std::string, int> count;
-  for (const auto& d : found) parts.push_back({d.model + "_" + std::to_string(count[d.model]++), d.model, d.pose});
+  for (const auto& d : found) parts.push_back({d.model + "_" + std::to_string(count[d.model]++), d.model, d.pose, d.ambiguous_poses});
   if (m.config.true_poses) {
     parts.clear();
-    for (const SceneObject& o : m.scene.objects) parts.push_back({o.name, o.model, o.T_base_object});
+    for (const SceneObject& o : m.scene.objects) parts.push_back({o.name, o.model, o.T_base_object, {}});
   }
   // the truth each detection stands for: the nearest true object of its model (scoring only)
   std::vector<int> truth(parts.size(), -1);

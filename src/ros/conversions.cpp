@@ -360,6 +360,7 @@ uint8_t toPlanStatus(cellsight::PlanStatus s) {
     case cellsight::PlanStatus::kNoPath: return M::NO_PATH;
     case cellsight::PlanStatus::kBadInput: return M::BAD_INPUT;
     case cellsight::PlanStatus::kNothingLeft: return M::NOTHING_LEFT;
+    case cellsight::PlanStatus::kAmbiguousPose: return M::AMBIGUOUS_POSE;
   }
   return M::BAD_INPUT;
 }

@@ -147,7 +147,8 @@ class GraspPlannerNode {
     parts_.clear();
     for (const auto& d : detections_->detections) {
       try {
-        parts_.push_back({instanceName(d.name), d.model, T * cellsight_ros::fromPoseMsg(d.pose)});
+        parts_.push_back({instanceName(d.name), d.model, T * cellsight_ros::fromPoseMsg(d.pose), {}});
+        for (const auto& a : d.ambiguous_poses) parts_.back().ambiguous_poses.push_back(T * cellsight_ros::fromPoseMsg(a));
       } catch (const std::exception& e) {
         ROS_WARN("grasp_planner: detection '%s' skipped: %s", d.name.c_str(), e.what());
       }

@@ -264,6 +264,14 @@ class ModelMatching {
       m.rmse = d.rmse;
       m.matcher = d.matcher;
       m.cluster = d.cluster;
+      for (const auto& a : d.ambiguous_poses) m.ambiguous_poses.push_back(tf2::toMsg(a));
+      if (!d.ambiguous_poses.empty())
+        ROS_WARN("model_matching: %s (%s): %zu pose(s) turned about the table's normal (the first by %.0f deg, scoring %.2f of "
+                 "this pose's) fit the scan about as well, so the scan cannot tell them apart; the detection carries them "
+                 "(Detection.ambiguous_poses): check the part's orientation before placing it, or turn it and scan again",
+                 m.name.c_str(), d.model.c_str(), d.ambiguous_poses.size(),
+                 Eigen::AngleAxisd(d.ambiguous_poses.front().linear() * d.pose.linear().transpose()).angle() * 180 / M_PI,
+                 d.alternative_score_share);
       out->detections.push_back(m);
     }
     return true;
@@ -348,7 +356,11 @@ class ModelMatching {
                                  {"coverage", d.coverage},
                                  {"rmse", d.rmse},
                                  {"matcher", d.matcher},
-                                 {"cluster", d.cluster}});
+                                 {"cluster", d.cluster},
+                                 {"ambiguous_poses", nlohmann::json::array()}});
+      for (const auto& a : d.ambiguous_poses)
+        j["detections"].back()["ambiguous_poses"].push_back(
+            {{"xyz", {a.position.x, a.position.y, a.position.z}}, {"quat", {a.orientation.x, a.orientation.y, a.orientation.z, a.orientation.w}}});
       ROS_INFO("model_matching: %s = %s at (%.4f, %.4f, %.4f), fitness %.2f, coverage %.2f, rmse %.3f mm", d.name.c_str(),
                d.model.c_str(), d.pose.position.x, d.pose.position.y, d.pose.position.z, d.fitness, d.coverage,
                d.rmse * 1e3);

@@ -257,7 +257,15 @@ struct ScoredDetection {
   std::string model;
   Eigen::Isometry3d pose;
   double fitness = 0, coverage = 0, rmse = 0, see_through = 0, unseen = 0, continuation = 0;
+  double alternative_score_share = 0;             ///< PartDetection's (0: no turn fits as closely)
+  std::vector<Eigen::Isometry3d> ambiguous_poses;  ///< PartDetection's (empty: not ambiguous)
 };
+
+/// The matcher's word on a detection's turns (PartDetection::ambiguous), for the JSON.
+void addAmbiguity(const ScoredDetection& d, json* j) {
+  (*j)["ambiguous"] = !d.ambiguous_poses.empty();
+  (*j)["alternative_score_share"] = d.alternative_score_share;
+}
 
 /// Detections against a scene's truth: each object takes the nearest unused detection of its
 /// model, found when within max_t / max_r; detections left over are false. Per part and totals.
@@ -299,6 +307,8 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
       p["see_through"] = dets[bi].see_through;
       p["unseen"] = dets[bi].unseen;
       p["continuation"] = dets[bi].continuation;
+      addAmbiguity(dets[bi], &p);
+      counts->ambiguous_tp += !dets[bi].ambiguous_poses.empty();
       terr->push_back(be.translation * 1e3);
       rerr->push_back(be.rotation / kDeg);
       ++counts->tp;
@@ -322,6 +332,22 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
               {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through}, {"unseen", dets[i].unseen},
               {"continuation", dets[i].continuation}, {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)},
               {"detection", i}};
+    addAmbiguity(dets[i], &f);
+    if (!dets[i].ambiguous_poses.empty()) {
+      ++counts->ambiguous_fp;
+      // the poses the matcher offered beside it: is one of them the part's?
+      bool right = false;
+      for (size_t k = 0; k < scene.objects.size(); ++k) {
+        const auto& o = scene.objects[k];
+        if (o.model != dets[i].model || out["parts"][k]["found"].get<bool>()) continue;
+        for (const auto& a : dets[i].ambiguous_poses) {
+          const PoseError e = poseError(lib.model(o.model).info, centroids.centroid(o.model), a, o.T_base_object);
+          right = right || (e.translation <= max_t && e.rotation <= max_r);
+        }
+      }
+      f["alternative_right"] = right;
+      counts->ambiguous_fp_alternative_right += right;
+    }
     double nearest = 1e9;
     for (const auto& o : scene.objects) {
       const Eigen::Vector3d c = lib.has(o.model) ? Eigen::Vector3d(o.T_base_object * centroids.centroid(o.model))
@@ -361,7 +387,10 @@ int runDemo(const Options& o) {
   }
   std::vector<ScoredDetection> dets;
   for (const json& d : raw["detections"])
+  {
     dets.push_back({d.at("model"), cellsight_tools::poseFromJson(d), d.at("fitness"), d.at("coverage"), d.at("rmse").get<double>()});
+    for (const auto& a : d.value("ambiguous_poses", json::array())) dets.back().ambiguous_poses.push_back(cellsight_tools::poseFromJson(a));
+  }
   // "found": the right model within 5 mm / 5° (a gross-error test); the errors are reported as measured
   DetectionCounts counts;
   std::vector<double> terr, rerr;
@@ -440,7 +469,9 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, light,
                                     &cr.fragments);
   std::vector<ScoredDetection> dets;
-  for (const auto& d : found) dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through, d.unseen, d.continuation});
+  for (const auto& d : found)
+    dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through, d.unseen, d.continuation,
+                    d.alternative_score_share, d.ambiguous_poses});
   json sj = scoreDetections(scene, lib, matcher, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, counts, terr, rerr);
   // a missed part: the pose of its model nearest the truth that validation refused, with the
   // figures it failed on
@@ -572,6 +603,9 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
     total.tp += counts.tp;
     total.fp += counts.fp;
     total.fn += counts.fn;
+    total.ambiguous_tp += counts.ambiguous_tp;
+    total.ambiguous_fp += counts.ambiguous_fp;
+    total.ambiguous_fp_alternative_right += counts.ambiguous_fp_alternative_right;
     for (const auto& p : sj["parts"]) {
       if (p["found"].get<bool>() || p.value("distractor", false)) continue;
       if (p.value("scan_points", 0) == 0) ++unmeasured;
@@ -595,6 +629,11 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   // a false detection of their model fits as well (describeScanPoints)
   out["fn_no_scan_point"] = unmeasured;
   out["fn_points_fit_a_false_pose"] = fits_both;
+  // detections the matcher reported ambiguous (a turn fits about as well): right ones, false
+  // ones, and false ones whose alternative pose is the part's
+  out["ambiguous_found"] = total.ambiguous_tp;
+  out["ambiguous_false"] = total.ambiguous_fp;
+  out["ambiguous_false_alternative_right"] = total.ambiguous_fp_alternative_right;
   out["precision"] = total.precision();
   out["recall"] = total.recall();
   out["f1"] = total.f1();
@@ -618,6 +657,9 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   std::printf("cells: %d found, %d missed (%d with no scan point on the part, %d whose scan points a false pose of its model "
               "fits as well), %d false\n",
               total.tp, total.fn, unmeasured, fits_both, total.fp);
+  std::printf("cells: reported ambiguous (a turn fits about as well): %d of the found, %d of the false (%d whose other pose "
+              "is the part's)\n",
+              total.ambiguous_tp, total.ambiguous_fp, total.ambiguous_fp_alternative_right);
   std::printf("cells: %zu seeds, P %.3f R %.3f F1 %.3f, median %.3f mm %.3f deg, surface RMS median %.4f mm max %.4f mm\n",
               seeds.size(), total.precision(), total.recall(), total.f1(), median(terr), median(rerr), median(rms),
               out["surface_error_rms_mm_max"].get<double>());

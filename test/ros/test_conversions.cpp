@@ -157,7 +157,7 @@ TEST(Conversions, GraspPlanTrajectoryRoundTripAndRefusals) {
   const std::array<std::string, 6> names{"joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6"};
   cellsight::PartPlan p;
   p.status = cellsight::PlanStatus::kOk;
-  p.part = {"housing_0", "housing", Eigen::Isometry3d(Eigen::Translation3d(0.5, 0.1, 0))};
+  p.part = {"housing_0", "housing", Eigen::Isometry3d(Eigen::Translation3d(0.5, 0.1, 0)), {}};
   p.poses = {{"grasp", Eigen::Isometry3d(Eigen::Translation3d(0.5, 0.1, 0.02)), cellsight::JointVector::Zero()}};
   p.T_base_target = Eigen::Isometry3d(Eigen::Translation3d(0.3, 0.0, 0));
   for (int i = 0; i < 5; ++i) {
@@ -173,6 +173,9 @@ TEST(Conversions, GraspPlanTrajectoryRoundTripAndRefusals) {
   EXPECT_EQ(m.object, "housing_0");
   EXPECT_EQ(m.passed_over.size(), 1u);
   EXPECT_NEAR(fromPoseMsg(m.target).translation().x(), 0.3, 1e-12);
+  cellsight::PartPlan ambiguous = p;
+  ambiguous.status = cellsight::PlanStatus::kAmbiguousPose;
+  EXPECT_EQ(toGraspPlanMsg(ambiguous, names, "base_link", ros::Time(3, 0)).status, cellsight::GraspPlan::AMBIGUOUS_POSE);
   const cellsight::TimedTrajectory t = fromTrajectoryMsg(m.trajectory, names);
   ASSERT_EQ(t.positions.size(), 5u);
   for (size_t i = 0; i < 5; ++i) {

@@ -154,6 +154,11 @@ struct MatchingConfig {
   /// support plane (locate() given one); false: the found pose stands.
   bool turned_poses = true;
   double turned_rmse_ratio = 0.7;  ///< (0, 1]; 1: the closest fit wins outright
+  /// A found pose is reported ambiguous (PartDetection::ambiguous) when one of its turns that
+  /// fits about as closely (turned_rmse_ratio) scores at least this share of its score: the scan
+  /// cannot tell the two apart (a holder lying on an arm turned by a half shows the camera the
+  /// same face). Reported only; the pose stands. [0, 1]; needs turned_poses.
+  double ambiguous_score_ratio = 0.85;
   /// Parts rest on a support (the table the clustering removed): a pose that puts the model more
   /// than this below the support plane is not physical and is discarded before validation
   /// (a thin flat part seen from above fits upside down as well). Used when locate() is given
@@ -248,6 +253,14 @@ struct PartDetection {
   /// explains (MatchingConfig::max_continuation; computed where unseen is)
   double continuation = 0;
   double score = 0;      ///< fitness × coverage (ranking)
+  /// Other poses of this part, turned about the support's normal, that fit the scan about as
+  /// closely (MatchingConfig::turned_poses, turned_rmse_ratio) and score at least
+  /// MatchingConfig::ambiguous_score_ratio x score, best first: the scan cannot tell this pose
+  /// from them (a grasp may suit them all; a placement does not). Empty: not ambiguous.
+  std::vector<Eigen::Isometry3d> ambiguous_poses;
+  /// the best score of a turned pose that fits about as closely, as a share of score (0: none);
+  /// what ambiguous_score_ratio is held against
+  double alternative_score_share = 0;
   int cluster = -1;      ///< index of the input cluster
   int iterations = 0;    ///< RANSAC hypotheses drawn
   std::string matcher;   ///< the coarse stage: "ppf", "ransac" or "fgr"

@@ -45,11 +45,15 @@ struct LocatedPart {
   std::string name;   ///< instance name (object/<n>)
   std::string model;
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< model frame in base_link
+  /// other poses the scan cannot tell `pose` from (PartDetection::ambiguous_poses, base_link):
+  /// where the part is to go, or where the base part's targets are, is not known (kAmbiguousPose)
+  std::vector<Eigen::Isometry3d> ambiguous_poses;
 };
 
 enum class PlanStatus {
   kOk, kUnknownModel, kNotInAssembly, kBasePart, kNoBase, kNoGrasp, kUnreachable, kNoPath, kBadInput,
-  kNothingLeft  ///< planNext(): every located part of the assembly is placed or was refused
+  kNothingLeft,  ///< planNext(): every located part of the assembly is placed or was refused
+  kAmbiguousPose  ///< the part's or the base part's pose is ambiguous (LocatedPart::ambiguous_poses)
 };
 const char* planStatusName(PlanStatus s);
 

@@ -1,5 +1,6 @@
 // ModelMatcher: the per-model index built once, one (cluster, model) pair from coarse stage to
 // validated pose, and locate() over clusters, models and instances.
+#include <algorithm>
 #include <pcl/features/normal_3d.h>
 #include <pcl/search/kdtree.h>
 
@@ -347,7 +348,25 @@ PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, 
   for (const auto& p : poses)
     if (p.rmse * cfg.turned_rmse_ratio <= closest && (!best || p.score > best->score)) best = &p;
   *turned = best != &poses.front();
-  return *best;
+  // the others among those, unless the polish brought them back onto the winner: the scan tells
+  // the winner from them only by the difference of their scores
+  PartDetection out = *best;
+  std::vector<const PartDetection*> others;
+  for (const auto& p : poses)
+    if (&p != best && p.rmse * cfg.turned_rmse_ratio <= closest && p.score > 0 &&
+        poseError(m.info, m.centroid, p.pose, best->pose).rotation >= kSameTurn)
+      others.push_back(&p);
+  std::sort(others.begin(), others.end(), [](const PartDetection* a, const PartDetection* b) { return a->score > b->score; });
+  if (!others.empty() && out.score > 0) out.alternative_score_share = others.front()->score / out.score;
+  for (const PartDetection* p : others) {
+    if (p->score < cfg.ambiguous_score_ratio * out.score) break;
+    // two turns the polish brought to one pose are one alternative
+    if (std::none_of(out.ambiguous_poses.begin(), out.ambiguous_poses.end(), [&](const Eigen::Isometry3d& q) {
+          return poseError(m.info, m.centroid, p->pose, q).rotation < kSameTurn;
+        }))
+      out.ambiguous_poses.push_back(p->pose);
+  }
+  return out;
 }
 
 }  // namespace
@@ -367,6 +386,10 @@ ModelMatcher::ModelMatcher(std::shared_ptr<const ModelLibrary> library, const Ma
   if (!(config_.turned_rmse_ratio > 0 && config_.turned_rmse_ratio <= 1)) {
     throw std::invalid_argument("ModelMatcher: turned_rmse_ratio must be in (0, 1] (got " +
                                 std::to_string(config_.turned_rmse_ratio) + ")");
+  }
+  if (!(config_.ambiguous_score_ratio >= 0 && config_.ambiguous_score_ratio <= 1)) {
+    throw std::invalid_argument("ModelMatcher: ambiguous_score_ratio must be in [0, 1] (got " +
+                                std::to_string(config_.ambiguous_score_ratio) + ")");
   }
   if (config_.threads <= 0) config_.threads = std::max(1u, std::thread::hardware_concurrency());
   if (config_.descriptor == "learned" && config_.coarse != "ppf") {

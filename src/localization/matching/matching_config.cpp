@@ -129,6 +129,7 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.split_second_look = m.getBool("split_second_look", c.split_second_look);
   c.turned_rmse_ratio = m.getDouble("turned_rmse_ratio", c.turned_rmse_ratio);
   if (!(c.turned_rmse_ratio > 0 && c.turned_rmse_ratio <= 1)) m.fail("turned_rmse_ratio", "must be in (0, 1]");
+  share("ambiguous_score_ratio", c.ambiguous_score_ratio);
   positive("icp_slack_range", c.icp_slack_range);
   positive("icp_slack_tolerance", c.icp_slack_tolerance);
   share("icp_slack_eigen_ratio", c.icp_slack_eigen_ratio);
