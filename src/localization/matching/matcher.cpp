@@ -22,6 +22,9 @@ namespace {
 constexpr size_t kPolished = 2;
 /// Turns of a pose within this of one another (rad, modulo the model's symmetry) are one pose.
 constexpr double kSameTurn = 2 * M_PI / 180;
+/// a turned pose that the polish brought within this of another (half the smallest turn tried)
+/// came back to it: refinement scatter, not another pose
+constexpr double kOtherTurn = 45 * M_PI / 180;
 /// polishSplitParts: a part needs this many points of other clusters or fragments near its model
 /// to be polished again on them; at most this many rounds; a round moving a model point less
 /// than this ends it (m)
@@ -348,13 +351,13 @@ PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, 
   for (const auto& p : poses)
     if (p.rmse * cfg.turned_rmse_ratio <= closest && (!best || p.score > best->score)) best = &p;
   *turned = best != &poses.front();
-  // the others among those, unless the polish brought them back onto the winner: the scan tells
-  // the winner from them only by the difference of their scores
+  // the others among those, unless the polish brought them back towards the winner: the scan
+  // tells the winner from them only by the difference of their scores
   PartDetection out = *best;
   std::vector<const PartDetection*> others;
   for (const auto& p : poses)
     if (&p != best && p.rmse * cfg.turned_rmse_ratio <= closest && p.score > 0 &&
-        poseError(m.info, m.centroid, p.pose, best->pose).rotation >= kSameTurn)
+        poseError(m.info, m.centroid, p.pose, best->pose).rotation >= kOtherTurn)
       others.push_back(&p);
   std::sort(others.begin(), others.end(), [](const PartDetection* a, const PartDetection* b) { return a->score > b->score; });
   if (!others.empty() && out.score > 0) out.alternative_score_share = others.front()->score / out.score;
@@ -362,7 +365,7 @@ PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, 
     if (p->score < cfg.ambiguous_score_ratio * out.score) break;
     // two turns the polish brought to one pose are one alternative
     if (std::none_of(out.ambiguous_poses.begin(), out.ambiguous_poses.end(), [&](const Eigen::Isometry3d& q) {
-          return poseError(m.info, m.centroid, p->pose, q).rotation < kSameTurn;
+          return poseError(m.info, m.centroid, p->pose, q).rotation < kOtherTurn;
         }))
       out.ambiguous_poses.push_back(p->pose);
   }
