@@ -163,10 +163,8 @@ PartPlan GraspPlanner::plan(size_t index, const JointVector& start) const {
   if (base == parts_.size()) return finish(PlanStatus::kNoBase, "the base part '" + assembly_.base_model + "' was not located");
   // a pose the scan cannot tell from another: the placement (which face goes where) is unknown
   auto ambiguous = [](const LocatedPart& part, const std::string& what) {
-    const double turn = Eigen::AngleAxisd(part.ambiguous_poses.front().linear() * part.pose.linear().transpose()).angle();
-    return what + " '" + part.name + "' fits the scan turned by " + std::to_string(static_cast<int>(std::lround(turn * 180 / M_PI))) +
-           " deg about the table's normal as well (" + std::to_string(part.ambiguous_poses.size()) +
-           " such pose(s)): turn it and scan again, or check its orientation";
+    return what + " '" + part.name + "' fits the scan turned about the table's normal as well (" +
+           std::to_string(part.ambiguous_poses.size()) + " such pose(s), Detection.ambiguous_poses): turn it and scan again, or check its orientation";
   };
   if (!p.part.ambiguous_poses.empty()) return finish(PlanStatus::kAmbiguousPose, ambiguous(p.part, "the part"));
   if (!parts_[base].ambiguous_poses.empty())

@@ -147,8 +147,10 @@ class GraspPlannerNode {
     parts_.clear();
     for (const auto& d : detections_->detections) {
       try {
-        parts_.push_back({instanceName(d.name), d.model, T * cellsight_ros::fromPoseMsg(d.pose), {}});
-        for (const auto& a : d.ambiguous_poses) parts_.back().ambiguous_poses.push_back(T * cellsight_ros::fromPoseMsg(a));
+        // whole or not at all: a part whose other poses could not be read must not be planned as if it had none
+        cellsight::LocatedPart part{instanceName(d.name), d.model, T * cellsight_ros::fromPoseMsg(d.pose), {}};
+        for (const auto& a : d.ambiguous_poses) part.ambiguous_poses.push_back(T * cellsight_ros::fromPoseMsg(a));
+        parts_.push_back(std::move(part));
       } catch (const std::exception& e) {
         ROS_WARN("grasp_planner: detection '%s' skipped: %s", d.name.c_str(), e.what());
       }

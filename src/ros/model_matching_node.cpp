@@ -270,7 +270,9 @@ class ModelMatching {
                  "this pose's) fit the scan about as well, so the scan cannot tell them apart; the detection carries them "
                  "(Detection.ambiguous_poses): check the part's orientation before placing it, or turn it and scan again",
                  m.name.c_str(), d.model.c_str(), d.ambiguous_poses.size(),
-                 Eigen::AngleAxisd(d.ambiguous_poses.front().linear() * d.pose.linear().transpose()).angle() * 180 / M_PI,
+                 // the turn between them as the model's symmetry leaves it (the rotation does not depend on the centroid)
+                 cellsight::poseError(library_->model(d.model).info, Eigen::Vector3d::Zero(), d.ambiguous_poses.front(), d.pose)
+                         .rotation * 180 / M_PI,
                  d.alternative_score_share);
       out->detections.push_back(m);
     }

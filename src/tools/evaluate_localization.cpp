@@ -328,6 +328,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
   // what each false detection is: a wrong pose of a part, a part taken for another, or a
   // distractor taken for a part (the nearest object's centre to the detection's)
   out["false_detections"] = json::array();
+  std::vector<bool> claimed(scene.objects.size(), false);  // a missed part one ambiguous false detection offered already
   for (size_t i = 0; i < dets.size(); ++i) {
     if (used[i]) continue;
     ++counts->fp;
@@ -343,11 +344,12 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
       bool right = false;
       for (size_t k = 0; k < scene.objects.size(); ++k) {
         const auto& o = scene.objects[k];
-        if (o.model != dets[i].model || out["parts"][k]["found"].get<bool>()) continue;
+        if (right || claimed[k] || o.model != dets[i].model || out["parts"][k]["found"].get<bool>()) continue;
         for (const auto& a : dets[i].ambiguous_poses) {
           const PoseError e = poseError(lib.model(o.model).info, centroids.centroid(o.model), a, o.T_base_object);
           right = right || (e.translation <= max_t && e.rotation <= max_r);
         }
+        claimed[k] = right;
       }
       f["alternative_right"] = right;
       counts->ambiguous_fp_alternative_right += right;

@@ -25,7 +25,7 @@ ScanCloud addUniformOutliers(const ScanCloud& cloud, const Eigen::AlignedBox3f& 
 
 struct DetectionCounts {
   int tp = 0, fp = 0, fn = 0;
-  /// of tp and fp: detections the matcher reported ambiguous (PartDetection::ambiguous); of
+  /// of tp and fp: detections the matcher reported ambiguous (PartDetection::ambiguous_poses); of
   /// those false, the ones whose alternative pose is a part's
   int ambiguous_tp = 0, ambiguous_fp = 0, ambiguous_fp_alternative_right = 0;
   double precision() const { return tp + fp ? static_cast<double>(tp) / (tp + fp) : 0.0; }

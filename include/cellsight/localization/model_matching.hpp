@@ -154,7 +154,7 @@ struct MatchingConfig {
   /// support plane (locate() given one); false: the found pose stands.
   bool turned_poses = true;
   double turned_rmse_ratio = 0.7;  ///< (0, 1]; 1: the closest fit wins outright
-  /// A found pose is reported ambiguous (PartDetection::ambiguous) when one of its turns that
+  /// A found pose is reported ambiguous (PartDetection::ambiguous_poses) when one of its turns that
   /// fits about as closely (turned_rmse_ratio) scores at least this share of its score: the scan
   /// cannot tell the two apart (a holder lying on an arm turned by a half shows the camera the
   /// same face). Reported only; the pose stands. [0, 1]; needs turned_poses.
@@ -256,10 +256,13 @@ struct PartDetection {
   /// Other poses of this part, turned about the support's normal, that fit the scan about as
   /// closely (MatchingConfig::turned_poses, turned_rmse_ratio) and score at least
   /// MatchingConfig::ambiguous_score_ratio x score, best first: the scan cannot tell this pose
-  /// from them (a grasp may suit them all; a placement does not). Empty: not ambiguous.
+  /// from them (a grasp may suit them all; a placement does not). Empty: not ambiguous, or not
+  /// assessed (a pose accepted at a second look, MatchingConfig::unseen_second_look and
+  /// split_second_look, is not turned). A pose polished again later (split parts, refine()) carries
+  /// them along, canonical like the pose.
   std::vector<Eigen::Isometry3d> ambiguous_poses;
-  /// the best score of a turned pose that fits about as closely, as a share of score (0: none);
-  /// what ambiguous_score_ratio is held against
+  /// the best score of a turned pose that fits about as closely, as a share of score when the
+  /// turned poses were scored (0: none); what ambiguous_score_ratio is held against
   double alternative_score_share = 0;
   int cluster = -1;      ///< index of the input cluster
   int iterations = 0;    ///< RANSAC hypotheses drawn

@@ -309,6 +309,13 @@ PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, c
   return fine;
 }
 
+/// A detection whose pose moved from `before` to d->pose (polished on more points, on a second
+/// scan): the turns it cannot be told from move with it, each put in the model's canonical form.
+void carryTurns(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3d& before, PartDetection* d) {
+  const Eigen::Isometry3d move = d->pose * before.inverse();
+  for (auto& a : d->ambiguous_poses) a = canonicalPose(m.info, m.centroid, move * a);
+}
+
 /// The found pose, or one turned about the support's normal that fits the scan about as closely
 /// (RMSE within turned_rmse_ratio of the closest) and scores higher (MatchingConfig::turned_poses).
 /// *turned: whether it was turned.
@@ -621,6 +628,7 @@ void polishSplitParts(std::vector<PartDetection>& parts, const std::vector<std::
       if (step < kSplitSettled) break;
     }
     if (rounds == 0) return;
+    carryTurns(m, parts[i].pose, &cur);
     cur.pose = canonicalPose(m.info, m.centroid, cur.pose);
     parts[i] = cur;
     moves[i] = moved;
@@ -1065,6 +1073,7 @@ std::vector<PartDetection> ModelMatcher::locate(const std::vector<ScanCloud>& cl
         const int j = mi.field.lookup(q);
         if (j < 0 || (q - mi.fine->points[j]).squaredNorm() > r2) rest.points.push_back(p);
       }
+      carryTurns(mi, d.pose, &d);
       d.pose = canonicalPose(mi.info, mi.centroid, d.pose);
       out.push_back(d);
       if (cfg.min_coverage > 0 && rest.found < cfg.max_instances &&
@@ -1164,6 +1173,7 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
       why[i] = name + ": the second scan moves it " + std::to_string(shift * 1e3) + " mm, above refine_max_shift: pose kept";
       return;
     }
+    carryTurns(m, parts[i].pose, &r);
     r.pose = canonicalPose(m.info, m.centroid, r.pose);
     r.refined = true;
     r.refine_seconds = parts[i].refine_seconds + seconds(t);
