@@ -392,8 +392,7 @@ int runDemo(const Options& o) {
     throw std::runtime_error(o.detections + ": not valid JSON: " + e.what());
   }
   std::vector<ScoredDetection> dets;
-  for (const json& d : raw["detections"])
-  {
+  for (const json& d : raw["detections"]) {
     dets.push_back({d.at("model"), cellsight_tools::poseFromJson(d), d.at("fitness"), d.at("coverage"), d.at("rmse").get<double>()});
     for (const auto& a : d.value("ambiguous_poses", json::array())) dets.back().ambiguous_poses.push_back(cellsight_tools::poseFromJson(a));
   }
