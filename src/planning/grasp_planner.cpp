@@ -109,24 +109,28 @@ void GraspPlanner::setScene(CollisionWorld world, const std::vector<LocatedPart>
                                                                               : world_->addObject(p.name, it->second.second, p.pose));
   }
   world_->setScan(scan);
-  // lying at its target already
+  // lying at its target already: known only with the base part's pose unambiguous, and then
+  // only where every pose the scan leaves the part (Detection.ambiguous_poses) is at the target
   size_t base = parts_.size();
   for (size_t i = 0; i < parts_.size(); ++i) {
     if (parts_[i].model == assembly_.base_model && object_ids_[i] >= 0 && base == parts_.size()) base = i;
   }
+  if (base == parts_.size() || !parts_[base].ambiguous_poses.empty()) return;
   for (size_t i = 0; i < parts_.size(); ++i) {
     auto it = models_.find(parts_[i].model);
-    if (base == parts_.size() || i == base || it == models_.end()) continue;
+    if (i == base || it == models_.end()) continue;
     const ModelInfo& info = it->second.first;
     const Eigen::Isometry3d target = parts_[base].pose * info.T_0i;
     const Eigen::Vector3d c = it->second.second->surfaceCentroid();
-    if ((parts_[i].pose * c - target * c).norm() > assembly_.placed_tolerance) continue;
-    for (const auto& S : symmetryRotations(info, 72, c)) {
-      if (Eigen::AngleAxisd(parts_[i].pose.linear().transpose() * (target * S).linear()).angle() <= assembly_.placed_tolerance_rad) {
-        placed_[i] = 1;
-        break;
-      }
-    }
+    const auto symmetry = symmetryRotations(info, 72, c);
+    auto atTarget = [&](const Eigen::Isometry3d& pose) {
+      if ((pose * c - target * c).norm() > assembly_.placed_tolerance) return false;
+      return std::any_of(symmetry.begin(), symmetry.end(), [&](const Eigen::Isometry3d& S) {
+        return Eigen::AngleAxisd(pose.linear().transpose() * (target * S).linear()).angle() <= assembly_.placed_tolerance_rad;
+      });
+    };
+    if (atTarget(parts_[i].pose) && std::all_of(parts_[i].ambiguous_poses.begin(), parts_[i].ambiguous_poses.end(), atTarget))
+      placed_[i] = 1;
   }
 }
 

@@ -465,3 +465,42 @@ TEST(GraspPlanner, RefusesAPartWhosePoseIsAmbiguous) {
     EXPECT_NE(h.reason.find("the base part"), std::string::npos) << h.reason;
   }
 }
+
+// A part found at its target (a rescan after placing it) counts as placed, but not when the
+// scan leaves it a turned pose off the target, nor while the base part's own pose is ambiguous:
+// then whether it sits right is not known, and the planner refuses it as ambiguous instead.
+TEST(GraspPlanner, APartAtItsTargetCountsAsPlacedOnlyWhenItsPoseIsKnown) {
+  const auto halfTurn = [](const Eigen::Isometry3d& T) {
+    return Eigen::Isometry3d(Eigen::Translation3d(T.translation()) * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()) *
+                             Eigen::Translation3d(-T.translation())) *
+           T;
+  };
+  DemoCell cell;
+  size_t base = cell.parts.size(), holder = cell.parts.size();
+  for (size_t i = 0; i < cell.parts.size(); ++i) {
+    if (cell.parts[i].model == cell.assembly.base_model) base = i;
+    if (cell.parts[i].model == "holder") holder = i;
+  }
+  ASSERT_LT(base, cell.parts.size());
+  ASSERT_LT(holder, cell.parts.size());
+  cell.parts[holder].pose = cell.parts[base].pose * cell.models.at("holder").first.T_0i;
+  GraspPlanner gp(arm(), cell.assembly, GripperConfig{}, MotionPlannerConfig{}, cell.models);
+  gp.setScene(cell.world(), cell.parts, {});
+  EXPECT_TRUE(gp.placed(holder));
+  // its other pose the model's symmetry maps onto the target: still placed
+  std::vector<LocatedPart> same = cell.parts;
+  same[holder].ambiguous_poses.push_back(same[holder].pose * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()));
+  gp.setScene(cell.world(), same, {});
+  EXPECT_TRUE(gp.placed(holder));
+  // upside down at the target: not known to be placed, and refused as ambiguous
+  std::vector<LocatedPart> turned = cell.parts;
+  turned[holder].ambiguous_poses.push_back(halfTurn(turned[holder].pose));
+  gp.setScene(cell.world(), turned, {});
+  EXPECT_FALSE(gp.placed(holder));
+  EXPECT_EQ(gp.plan(holder, cell.assembly.home).status, PlanStatus::kAmbiguousPose);
+  // the base part ambiguous: no part counts as placed
+  std::vector<LocatedPart> base_turned = cell.parts;
+  base_turned[base].ambiguous_poses.push_back(halfTurn(base_turned[base].pose));
+  gp.setScene(cell.world(), base_turned, {});
+  EXPECT_FALSE(gp.placed(holder));
+}

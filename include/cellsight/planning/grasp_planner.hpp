@@ -100,7 +100,9 @@ class GraspPlanner {
 
   /// The collision world for a scene: the table, every located part of a known model as its
   /// mesh, and the scan points they leave unexplained. Remembers which object each part is. A
-  /// part located at its target already (placed_tolerance: e.g. after a rescan) counts as placed.
+  /// part located at its target already (placed_tolerance: e.g. after a rescan) counts as placed,
+  /// unless its pose or the base part's is ambiguous (LocatedPart::ambiguous_poses) with a pose
+  /// off the target.
   void setScene(CollisionWorld world, const std::vector<LocatedPart>& parts, const std::vector<Eigen::Vector3f>& scan);
   const CollisionWorld& world() const { return *world_; }
   const std::vector<LocatedPart>& parts() const { return parts_; }
