@@ -265,6 +265,7 @@ class ModelMatching {
       m.matcher = d.matcher;
       m.cluster = d.cluster;
       for (const auto& a : d.ambiguous_poses) m.ambiguous_poses.push_back(tf2::toMsg(a));
+      m.alternative_score_share = d.alternative_score_share;
       if (!d.ambiguous_poses.empty())
         ROS_WARN("model_matching: %s (%s): %zu pose(s) turned about the table's normal (the first by %.0f deg, scoring %.2f of "
                  "this pose's) fit the scan about as well, so the scan cannot tell them apart; the detection carries them "
@@ -359,7 +360,8 @@ class ModelMatching {
                                  {"rmse", d.rmse},
                                  {"matcher", d.matcher},
                                  {"cluster", d.cluster},
-                                 {"ambiguous_poses", nlohmann::json::array()}});
+                                 {"ambiguous_poses", nlohmann::json::array()},
+                                 {"alternative_score_share", d.alternative_score_share}});
       for (const auto& a : d.ambiguous_poses)
         j["detections"].back()["ambiguous_poses"].push_back(
             {{"xyz", {a.position.x, a.position.y, a.position.z}}, {"quat", {a.orientation.x, a.orientation.y, a.orientation.z, a.orientation.w}}});

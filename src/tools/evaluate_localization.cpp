@@ -395,6 +395,7 @@ int runDemo(const Options& o) {
   for (const json& d : raw["detections"]) {
     dets.push_back({d.at("model"), cellsight_tools::poseFromJson(d), d.at("fitness"), d.at("coverage"), d.at("rmse").get<double>()});
     for (const auto& a : d.value("ambiguous_poses", json::array())) dets.back().ambiguous_poses.push_back(cellsight_tools::poseFromJson(a));
+    dets.back().alternative_score_share = d.value("alternative_score_share", 0.0);
   }
   // "found": the right model within 5 mm / 5° (a gross-error test); the errors are reported as measured
   DetectionCounts counts;
