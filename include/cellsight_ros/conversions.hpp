@@ -16,11 +16,16 @@
 #include "cellsight/common/camera_model.hpp"
 #include "cellsight/common/plane.hpp"
 #include "cellsight/common/scan_cloud.hpp"
+#include "cellsight/Detection.h"
 #include "cellsight/GraspPlan.h"
 #include "cellsight/LaserPlaneStamped.h"
 #include "cellsight/LaserSweep.h"
 #include "cellsight/localization/light_sweep.hpp"
 #include "cellsight/planning/grasp_planner.hpp"
+
+namespace cellsight {
+struct PartDetection;
+}  // namespace cellsight
 
 namespace cellsight_ros {
 
@@ -63,6 +68,11 @@ cellsight::ScanCloud fromCloudMsg(const sensor_msgs::PointCloud2& msg, size_t* d
 
 int64_t toNanoseconds(const ros::Time& t);
 ros::Time fromNanoseconds(int64_t ns);
+
+/// A located part as a Detection named `name` (its tf child frame, object/<n>): the pose and the
+/// turns the scan cannot tell from it (ambiguous_poses) in the frame it was located in, and the
+/// matcher's figures.
+cellsight::Detection toDetectionMsg(const cellsight::PartDetection& d, const std::string& name);
 
 /// A planner result as a GraspPlan (trajectory with the arm's joint names, times from `stamp`).
 cellsight::GraspPlan toGraspPlanMsg(const cellsight::PartPlan& plan, const std::array<std::string, 6>& joint_names,

@@ -1,5 +1,7 @@
 #include "cellsight_ros/conversions.hpp"
 
+#include "cellsight/localization/model_matching.hpp"
+
 #include <algorithm>
 
 #include <sensor_msgs/image_encodings.h>
@@ -363,6 +365,21 @@ uint8_t toPlanStatus(cellsight::PlanStatus s) {
     case cellsight::PlanStatus::kAmbiguousPose: return M::AMBIGUOUS_POSE;
   }
   return M::BAD_INPUT;
+}
+
+cellsight::Detection toDetectionMsg(const cellsight::PartDetection& d, const std::string& name) {
+  cellsight::Detection m;
+  m.model = d.model;
+  m.name = name;
+  m.pose = toPoseMsg(d.pose);
+  m.fitness = d.fitness;
+  m.coverage = d.coverage;
+  m.rmse = d.rmse;
+  m.matcher = d.matcher;
+  m.cluster = d.cluster;
+  for (const auto& a : d.ambiguous_poses) m.ambiguous_poses.push_back(toPoseMsg(a));
+  m.alternative_score_share = d.alternative_score_share;
+  return m;
 }
 
 cellsight::GraspPlan toGraspPlanMsg(const cellsight::PartPlan& plan, const std::array<std::string, 6>& joint_names,

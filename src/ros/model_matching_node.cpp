@@ -255,17 +255,7 @@ class ModelMatching {
     }
     size_t n = 0;
     for (const cellsight::PartDetection& d : dets) {
-      cellsight::Detection m;
-      m.model = d.model;
-      m.name = names[n++];
-      m.pose = tf2::toMsg(d.pose);
-      m.fitness = d.fitness;
-      m.coverage = d.coverage;
-      m.rmse = d.rmse;
-      m.matcher = d.matcher;
-      m.cluster = d.cluster;
-      for (const auto& a : d.ambiguous_poses) m.ambiguous_poses.push_back(tf2::toMsg(a));
-      m.alternative_score_share = d.alternative_score_share;
+      const cellsight::Detection m = cellsight_ros::toDetectionMsg(d, names[n++]);
       if (!d.ambiguous_poses.empty())
         ROS_WARN("model_matching: %s (%s): %zu pose(s) turned about the table's normal (the first by %.0f deg, scoring %.2f of "
                  "this pose's) fit the scan about as well, so the scan cannot tell them apart; the detection carries them "

@@ -498,9 +498,17 @@ TEST(GraspPlanner, APartAtItsTargetCountsAsPlacedOnlyWhenItsPoseIsKnown) {
   gp.setScene(cell.world(), turned, {});
   EXPECT_FALSE(gp.placed(holder));
   EXPECT_EQ(gp.plan(holder, cell.assembly.home).status, PlanStatus::kAmbiguousPose);
-  // the base part ambiguous: no part counts as placed
+  // turned by a quarter about the vertical through its centroid: in place, but not as it should be
+  const Eigen::Vector3d c = cell.parts[holder].pose * cell.models.at("holder").second->surfaceCentroid();
+  std::vector<LocatedPart> quarter = cell.parts;
+  quarter[holder].ambiguous_poses.push_back(Eigen::Translation3d(c) * Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()) *
+                                            Eigen::Translation3d(-c) * quarter[holder].pose);
+  gp.setScene(cell.world(), quarter, {});
+  EXPECT_FALSE(gp.placed(holder));
+  // the base part ambiguous: no part counts as placed, and the holder is refused as ambiguous
   std::vector<LocatedPart> base_turned = cell.parts;
   base_turned[base].ambiguous_poses.push_back(halfTurn(base_turned[base].pose));
   gp.setScene(cell.world(), base_turned, {});
   EXPECT_FALSE(gp.placed(holder));
+  EXPECT_EQ(gp.plan(holder, cell.assembly.home).status, PlanStatus::kAmbiguousPose);
 }

@@ -3,6 +3,7 @@
 #include <functional>
 #include <limits>
 
+#include "cellsight/localization/model_matching.hpp"
 #include "cellsight_ros/conversions.hpp"
 
 using namespace cellsight_ros;
@@ -151,6 +152,39 @@ TEST(Conversions, HugeCameraInfoIsRefused) {
   auto ci = toCameraInfo(c, "cam", ros::Time(1, 0));
   ci.width = ci.height = 60000;
   EXPECT_NE(errorOf([&] { fromCameraInfo(ci); }).find("over the limit"), std::string::npos);
+}
+
+// A located part with the turns the scan cannot tell from it: every figure and pose carried over.
+TEST(Conversions, DetectionCarriesItsAmbiguousTurns) {
+  cellsight::PartDetection d;
+  d.model = "holder";
+  d.pose = Eigen::Translation3d(0.5, -0.02, 0.025) * Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized());
+  d.fitness = 0.91;
+  d.coverage = 0.99;
+  d.rmse = 3.1e-5;
+  d.matcher = "ppf";
+  d.cluster = 4;
+  d.ambiguous_poses = {Eigen::Isometry3d(Eigen::Translation3d(0.52, -0.01, 0.025) * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ())),
+                       Eigen::Isometry3d(Eigen::Translation3d(0.51, 0.0, 0.025) * Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()))};
+  d.alternative_score_share = 0.93;
+  const cellsight::Detection m = cellsight_ros::toDetectionMsg(d, "object/holder_0");
+  EXPECT_EQ(m.model, "holder");
+  EXPECT_EQ(m.name, "object/holder_0");
+  EXPECT_TRUE(cellsight_ros::fromPoseMsg(m.pose).isApprox(d.pose, 1e-12));
+  EXPECT_DOUBLE_EQ(m.fitness, 0.91);
+  EXPECT_DOUBLE_EQ(m.coverage, 0.99);
+  EXPECT_DOUBLE_EQ(m.rmse, 3.1e-5);
+  EXPECT_EQ(m.matcher, "ppf");
+  EXPECT_EQ(m.cluster, 4);
+  ASSERT_EQ(m.ambiguous_poses.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) EXPECT_TRUE(cellsight_ros::fromPoseMsg(m.ambiguous_poses[i]).isApprox(d.ambiguous_poses[i], 1e-12)) << i;
+  EXPECT_DOUBLE_EQ(m.alternative_score_share, 0.93);
+  // not ambiguous: no turns, the share as measured
+  d.ambiguous_poses.clear();
+  d.alternative_score_share = 0.4;
+  const cellsight::Detection plain = cellsight_ros::toDetectionMsg(d, "object/holder_0");
+  EXPECT_TRUE(plain.ambiguous_poses.empty());
+  EXPECT_DOUBLE_EQ(plain.alternative_score_share, 0.4);
 }
 
 TEST(Conversions, GraspPlanTrajectoryRoundTripAndRefusals) {

@@ -93,11 +93,6 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   const auto e = cellsight::poseError(lib.model("bracket").info, centroid.centroid("bracket"), pose, truth);
   EXPECT_LT(e.translation, 1e-3);
   EXPECT_LT(e.rotation, 1 * M_PI / 180);
-  // not ambiguous: no turn reported, and the best turn (if one fits as closely) below
-  // ambiguous_score_ratio (config/matching.yaml: 0.85)
-  EXPECT_TRUE(det->detections[0].ambiguous_poses.empty());
-  EXPECT_GE(det->detections[0].alternative_score_share, 0.0);
-  EXPECT_LT(det->detections[0].alternative_score_share, 0.85);
   EXPECT_FALSE(det->warnings.empty());  // the all-NaN cluster is named
   auto warned = [](const cellsight::DetectionArray& d, const std::string& what) {
     for (const auto& w : d.warnings)

@@ -101,8 +101,8 @@ class GraspPlanner {
   /// The collision world for a scene: the table, every located part of a known model as its
   /// mesh, and the scan points they leave unexplained. Remembers which object each part is. A
   /// part located at its target already (placed_tolerance: e.g. after a rescan) counts as placed,
-  /// unless its pose or the base part's is ambiguous (LocatedPart::ambiguous_poses) with a pose
-  /// off the target.
+  /// unless the base part's pose is ambiguous or one of the part's own ambiguous_poses is off
+  /// the target (LocatedPart::ambiguous_poses).
   void setScene(CollisionWorld world, const std::vector<LocatedPart>& parts, const std::vector<Eigen::Vector3f>& scan);
   const CollisionWorld& world() const { return *world_; }
   const std::vector<LocatedPart>& parts() const { return parts_; }
