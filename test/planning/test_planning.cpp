@@ -65,6 +65,11 @@ std::vector<Eigen::Vector3f> boxPoints(const Eigen::Vector3d& lo, const Eigen::V
   return pts;
 }
 
+/// T turned by `angle` about `axis` through `pivot` (scene frame).
+Eigen::Isometry3d turnedAbout(const Eigen::Isometry3d& T, const Eigen::Vector3d& pivot, double angle, const Eigen::Vector3d& axis) {
+  return Eigen::Translation3d(pivot) * Eigen::AngleAxisd(angle, axis) * Eigen::Translation3d(-pivot) * T;
+}
+
 }  // namespace
 
 TEST(ArmModel, UrdfChainIsTheSimulatorsDhArm) {
@@ -418,11 +423,7 @@ TEST(GraspPlanner, RefusesWithTheReasonAndCarriesOn) {
 // assembly goes on past it and says why. With the base part ambiguous no target is known.
 TEST(GraspPlanner, RefusesAPartWhosePoseIsAmbiguous) {
   DemoCell cell;
-  const auto halfTurn = [](const Eigen::Isometry3d& T) {
-    return Eigen::Isometry3d(Eigen::Translation3d(T.translation()) * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()) *
-                             Eigen::Translation3d(-T.translation())) *
-           T;
-  };
+  const auto halfTurn = [](const Eigen::Isometry3d& T) { return turnedAbout(T, T.translation(), M_PI, Eigen::Vector3d::UnitZ()); };
   for (auto& p : cell.parts)
     if (p.model == "holder") p.ambiguous_poses.push_back(halfTurn(p.pose));
   GraspPlanner gp(arm(), cell.assembly, GripperConfig{}, MotionPlannerConfig{}, cell.models);
@@ -470,11 +471,6 @@ TEST(GraspPlanner, RefusesAPartWhosePoseIsAmbiguous) {
 // scan leaves it a turned pose off the target, nor while the base part's own pose is ambiguous:
 // then whether it sits right is not known, and the planner refuses it as ambiguous instead.
 TEST(GraspPlanner, APartAtItsTargetCountsAsPlacedOnlyWhenItsPoseIsKnown) {
-  const auto halfTurn = [](const Eigen::Isometry3d& T) {
-    return Eigen::Isometry3d(Eigen::Translation3d(T.translation()) * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()) *
-                             Eigen::Translation3d(-T.translation())) *
-           T;
-  };
   DemoCell cell;
   size_t base = cell.parts.size(), holder = cell.parts.size();
   for (size_t i = 0; i < cell.parts.size(); ++i) {
@@ -485,30 +481,26 @@ TEST(GraspPlanner, APartAtItsTargetCountsAsPlacedOnlyWhenItsPoseIsKnown) {
   ASSERT_LT(holder, cell.parts.size());
   cell.parts[holder].pose = cell.parts[base].pose * cell.models.at("holder").first.T_0i;
   GraspPlanner gp(arm(), cell.assembly, GripperConfig{}, MotionPlannerConfig{}, cell.models);
+  // the scene with part `which` given `alternative` as a pose the scan cannot tell from its own
+  auto placedWith = [&](size_t which, const Eigen::Isometry3d& alternative) {
+    std::vector<LocatedPart> parts = cell.parts;
+    parts[which].ambiguous_poses.push_back(alternative);
+    gp.setScene(cell.world(), parts, {});
+    return gp.placed(holder);
+  };
   gp.setScene(cell.world(), cell.parts, {});
   EXPECT_TRUE(gp.placed(holder));
+  const Eigen::Isometry3d& at = cell.parts[holder].pose;
   // its other pose the model's symmetry maps onto the target: still placed
-  std::vector<LocatedPart> same = cell.parts;
-  same[holder].ambiguous_poses.push_back(same[holder].pose * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()));
-  gp.setScene(cell.world(), same, {});
-  EXPECT_TRUE(gp.placed(holder));
+  EXPECT_TRUE(placedWith(holder, at * Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ())));
   // upside down at the target: not known to be placed, and refused as ambiguous
-  std::vector<LocatedPart> turned = cell.parts;
-  turned[holder].ambiguous_poses.push_back(halfTurn(turned[holder].pose));
-  gp.setScene(cell.world(), turned, {});
-  EXPECT_FALSE(gp.placed(holder));
+  EXPECT_FALSE(placedWith(holder, turnedAbout(at, at.translation(), M_PI, Eigen::Vector3d::UnitX())));
   EXPECT_EQ(gp.plan(holder, cell.assembly.home).status, PlanStatus::kAmbiguousPose);
   // turned by a quarter about the vertical through its centroid: in place, but not as it should be
-  const Eigen::Vector3d c = cell.parts[holder].pose * cell.models.at("holder").second->surfaceCentroid();
-  std::vector<LocatedPart> quarter = cell.parts;
-  quarter[holder].ambiguous_poses.push_back(Eigen::Translation3d(c) * Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()) *
-                                            Eigen::Translation3d(-c) * quarter[holder].pose);
-  gp.setScene(cell.world(), quarter, {});
-  EXPECT_FALSE(gp.placed(holder));
+  const Eigen::Vector3d c = at * cell.models.at("holder").second->surfaceCentroid();
+  EXPECT_FALSE(placedWith(holder, turnedAbout(at, c, M_PI / 2, Eigen::Vector3d::UnitZ())));
   // the base part ambiguous: no part counts as placed, and the holder is refused as ambiguous
-  std::vector<LocatedPart> base_turned = cell.parts;
-  base_turned[base].ambiguous_poses.push_back(halfTurn(base_turned[base].pose));
-  gp.setScene(cell.world(), base_turned, {});
-  EXPECT_FALSE(gp.placed(holder));
+  const Eigen::Isometry3d& base_pose = cell.parts[base].pose;
+  EXPECT_FALSE(placedWith(base, turnedAbout(base_pose, base_pose.translation(), M_PI, Eigen::Vector3d::UnitX())));
   EXPECT_EQ(gp.plan(holder, cell.assembly.home).status, PlanStatus::kAmbiguousPose);
 }
