@@ -469,9 +469,6 @@ std::shared_ptr<const ModelMatcher::ModelIndex> ModelMatcher::index(const std::s
     ne.setRadiusSearch(config_.normal_radius);
     pcl::PointCloud<pcl::Normal> normals;
     ne.compute(normals);
-    // each point lies on a mesh face (the library's uniform sample): keep that face's normal,
-    // which tells a flat face from the crease that the PCA normals blur over 2-3 mm
-    if (!e.mesh.faces.empty()) m->face_normals = coarse->normals;
     for (size_t i = 0; i < coarse->size(); ++i) {
       Vec3 n = normals[i].getNormalVector3fMap();
       if (!n.allFinite() || n.norm() < 0.5f) continue;

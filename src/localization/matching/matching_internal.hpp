@@ -132,7 +132,6 @@ struct ModelMatcher::ModelIndex {
   std::string id;
   ModelInfo info;
   std::shared_ptr<const ScanCloud> coarse;  // at config.voxel, PCA normals (as a scan sees them)
-  std::vector<Eigen::Vector3f> face_normals;  // per coarse point, its mesh face's normal (empty: a cloud model)
   std::vector<Fpfh> fpfh;                   // of coarse (invalid ones zeroed)
   pcl::KdTreeFLANN<pcl::FPFHSignature33> fpfh_tree;
   std::vector<int> fpfh_valid;              // coarse indices with a valid descriptor

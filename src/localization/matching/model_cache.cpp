@@ -16,7 +16,7 @@ using namespace matching_detail;
 namespace {
 
 // Bump when the preparation (sampling, normals, PPF table, field, grids) changes what it builds.
-constexpr uint32_t kCacheVersion = 2;
+constexpr uint32_t kCacheVersion = 1;
 constexpr uint32_t kMagic = 0x494d5343;  // "CSMI"
 
 void writeCloud(BinaryWriter& w, const ScanCloud& c) {
@@ -72,7 +72,6 @@ void ModelMatcher::saveIndex(const std::string& file, const ModelIndex& m) const
   w.str(m.id);
   w.pod<uint8_t>(m.has_mesh);
   writeCloud(w, *m.coarse);
-  w.vec(m.face_normals);
   writeCloud(w, *m.fine);
   writeCloud(w, m.ppf_cloud);
   w.pod(m.ppf.dist_step);
@@ -112,8 +111,6 @@ bool ModelMatcher::loadIndex(const std::string& file, const ModelEntry& e, Model
     if (r.str() != m.id) return false;
     m.has_mesh = r.pod<uint8_t>() != 0;
     m.coarse = std::make_shared<ScanCloud>(readCloud(r));
-    m.face_normals = r.vec<Eigen::Vector3f>();
-    if (!m.face_normals.empty() && m.face_normals.size() != m.coarse->size()) return false;
     m.fine = std::make_shared<ScanCloud>(readCloud(r));
     m.ppf_cloud = readCloud(r);
     m.ppf.dist_step = r.pod<float>();

@@ -141,10 +141,6 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   const float min_height = static_cast<float>(cfg.voxel);  // the lowest band: the part's own footprint
   const auto& mp = m.coarse->points;
   const auto& mn = m.coarse->normals;
-  // the mesh's face normals (a cloud model: the PCA ones again), for the unseen test's rim: the
-  // PCA normals tilt within 2-3 mm of a crease and join a flat face's edge band to the face
-  // across it
-  const auto& un = m.face_normals.size() == mp.size() ? m.face_normals : mn;
   // model point i faces `from` (model frame) within max_view_angle and the part does not hide it
   const float margin = static_cast<float>(std::max(0.0005, 0.5 * cfg.voxel));
   auto reaches = [&](const Vec3& from, size_t i) {
@@ -201,15 +197,14 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   }
   // ... and inside what camera and sheet reach, not at its rim: every point of its own face
   // within unseen_radius is visible and lit too (a sliver lit beside a shadow's edge gives the
-  // line extraction segments too short to keep); its own face: both normals within kSameFace
+  // line extraction segments too short to keep)
   size_t missed = 0;
   const float r_face2 = r_unseen * r_unseen;
   for (size_t i = 0; i < state.size(); ++i) {
     if (state[i] != 2) continue;
     bool inside = true;
     for (size_t j = 0; j < mp.size() && inside; ++j)
-      inside = state[j] != 0 || (mp[j] - mp[i]).squaredNorm() > r_face2 || mn[j].dot(mn[i]) < kSameFace ||
-               un[j].dot(un[i]) < kSameFace;
+      inside = state[j] != 0 || (mp[j] - mp[i]).squaredNorm() > r_face2 || mn[j].dot(mn[i]) < kSameFace;
     missed += inside;
   }
   if (see_through) *see_through = visible ? static_cast<double>(through) / visible : 0.0;
