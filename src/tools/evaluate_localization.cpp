@@ -257,7 +257,7 @@ struct ScoredDetection {
   std::string model;
   Eigen::Isometry3d pose;
   double fitness = 0, coverage = 0, rmse = 0, see_through = 0, unseen = 0, continuation = 0;
-  double alternative_score_share = 0;             ///< PartDetection's (0: no turn fits as closely)
+  double alternative_score_share = 0;             ///< PartDetection's (0: none fits as closely, or turns not scored)
   std::vector<Eigen::Isometry3d> ambiguous_poses{};  ///< PartDetection's (empty: not ambiguous)
 };
 
