@@ -311,6 +311,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
       p["see_through"] = dets[bi].see_through;
       p["unseen"] = dets[bi].unseen;
       p["continuation"] = dets[bi].continuation;
+      p["pose"] = cellsight_tools::poseToJson(dets[bi].pose);
       addAmbiguity(dets[bi], lib.model(o.model).info, c, &p);
       counts->ambiguous_tp += !dets[bi].ambiguous_poses.empty();
       terr->push_back(be.translation * 1e3);

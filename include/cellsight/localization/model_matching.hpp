@@ -88,6 +88,15 @@ struct MatchingConfig {
   /// major axis, where the cluster reaches farther along it than rest_end_ratio times those
   /// faces (parts touching in one cluster: its centre lies between them). 0: off.
   double rest_end_ratio = 1.2;
+  /// With a support plane: a polished pose tilted no more than this from one of the model's
+  /// stable rests (and no less than rest_snap_min_angle) is also laid into that rest and polished
+  /// again with its tilt held (turns about the support's normal and translations only); the
+  /// rested pose is kept where it is accepted and fits within rest_snap_rmse_ratio of the free
+  /// pose's RMSE (a part seen only by a narrow top face leaves its tilt to a few points).
+  /// 0: off (rad).
+  double rest_snap_angle = 0;
+  double rest_snap_min_angle = 0.0087;  ///< rad (0.5°): a smaller tilt is the scan's own say
+  double rest_snap_rmse_ratio = 1.25;
   double icp_spacing = 0.0005;     ///< m, model sampling for the fine alignment
   int icp_iterations = 40;
   double icp_max_points = 4000;    ///< scene points used by the final ICP (thinned evenly above this)

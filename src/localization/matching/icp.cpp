@@ -13,11 +13,22 @@ ClosestPoint meshClosest(const ModelMatcher::ModelIndex& m, const Eigen::Vector3
   return c;
 }
 
+/// The directions an ICP step may take (columns, orthonormal, in the step's scaled coordinates:
+/// turn × half the diameter, then translation): all six, or with `up` (scene frame) the turn
+/// about it (seen in the model frame through X, scene → model) and the three translations.
+static Eigen::Matrix<double, 6, Eigen::Dynamic> stepBasis(const Eigen::Isometry3d& X, const Eigen::Vector3d* up) {
+  if (!up) return Eigen::Matrix<double, 6, 6>::Identity();
+  Eigen::Matrix<double, 6, 4> B = Eigen::Matrix<double, 6, 4>::Zero();
+  B.block<3, 1>(0, 0) = (X.linear() * *up).normalized();
+  B.block<3, 3>(3, 1) = Eigen::Matrix3d::Identity();
+  return B;
+}
+
 /// Robust point-to-plane ICP of the scene points onto the model (Huber weights, shrinking
 /// correspondence distance); distance-field correspondences, then exact ones.
 /// `max_points`: the scene points used (evenly thinned); `polish`: finish with exact neighbours.
 Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T0,
-            const MatchingConfig& cfg, size_t max_points, bool polish) {
+            const MatchingConfig& cfg, size_t max_points, bool polish, const Eigen::Vector3d* up) {
   const size_t stride = std::max<size_t>(1, (s.icp_points.size() + max_points - 1) / std::max<size_t>(1, max_points));
   Eigen::Isometry3d X = T0.inverse().cast<double>();  // scene → model
   const auto& fp = m.fine->points;
@@ -107,13 +118,17 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     Eigen::Matrix<double, 6, 1> scale;
     scale << L, L, L, 1, 1, 1;
     const Eigen::Matrix<double, 6, 6> As = scale.asDiagonal().inverse() * A * scale.asDiagonal().inverse();
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(As);
+    // tilt held: steps lie in the span of the turn about the support's normal (in the model
+    // frame at the current pose) and the three translations
+    const Eigen::Matrix<double, 6, Eigen::Dynamic> B = stepBasis(X, up);
+    const Eigen::MatrixXd Ab = B.transpose() * As * B;
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Ab);
     const double floor_ev = degenerate_ratio * eig.eigenvalues().maxCoeff();
     Eigen::Matrix<double, 6, 1> xs = Eigen::Matrix<double, 6, 1>::Zero();
-    const Eigen::Matrix<double, 6, 1> bs = scale.asDiagonal().inverse() * b;
-    for (int k = 0; k < 6; ++k) {
+    const Eigen::VectorXd bs = B.transpose() * (scale.asDiagonal().inverse() * b);
+    for (int k = 0; k < static_cast<int>(Ab.rows()); ++k) {
       const double ev = eig.eigenvalues()[k];
-      if (ev > floor_ev && ev > 0) xs += eig.eigenvectors().col(k) * (eig.eigenvectors().col(k).dot(bs) / ev);
+      if (ev > floor_ev && ev > 0) xs += B * eig.eigenvectors().col(k) * (eig.eigenvectors().col(k).dot(bs) / ev);
     }
     const Eigen::Matrix<double, 6, 1> x = scale.asDiagonal().inverse() * xs;
     if (!x.allFinite()) break;

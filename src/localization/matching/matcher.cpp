@@ -61,10 +61,36 @@ void traceSurfaceTests(const SceneData& s, const ModelMatcher::ModelIndex& m, co
   d->continuation = continuation(s, m, T, cfg, support);
 }
 
-bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
-                const Eigen::Vector4f* support, const PartDetection& d, const Eigen::Isometry3f& T0, size_t points,
-                bool polish, PartDetection* c) {
-  Refined r = icp(s, m, T0, cfg, points, polish);
+/// T laid into the model's stable rest nearest its tilt on the support, when that tilt is at
+/// most max_angle and at least min_angle (less: what the scan says of the tilt is kept): turned
+/// about the model's centroid so that the rest's facet faces the support. False: no such rest.
+bool layIntoRest(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T, const Eigen::Vector4f& support,
+                 double min_angle, double max_angle, Eigen::Isometry3f* out) {
+  const Eigen::Vector3d n = support.head<3>().cast<double>().normalized();
+  const Eigen::Matrix3d R = T.linear().cast<double>();
+  const Eigen::Vector3d up = R.transpose() * n;  // the support's normal in the model frame
+  double best = max_angle;
+  const RestPose* rest = nullptr;
+  for (const RestPose& r : m.rests) {
+    const double a = std::acos(std::clamp(r.R.row(2).dot(up), -1.0, 1.0));
+    if (a <= best) best = a, rest = &r;
+  }
+  if (!rest || best < min_angle) return false;
+  const Eigen::Matrix3d S = Eigen::Quaterniond::FromTwoVectors(R * rest->R.row(2).transpose(), n).toRotationMatrix();
+  const Eigen::Vector3d c = T.cast<double>() * m.centroid;
+  Eigen::Isometry3d Tr = Eigen::Isometry3d::Identity();
+  Tr.linear() = S * R;
+  Tr.translation() = c - Tr.linear() * m.centroid;
+  *out = Tr.cast<float>();
+  return true;
+}
+
+/// ICP from T0 (see finishPose), its tilt held about `up` when given, scored into *c and centred
+/// in its slack. False when the ICP diverged or the pose is off the support.
+bool polishAndCentre(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                     const Eigen::Vector4f* support, const PartDetection& d, const Eigen::Isometry3f& T0,
+                     size_t points, bool polish, const Eigen::Vector3d* up, PartDetection* c) {
+  Refined r = icp(s, m, T0, cfg, points, polish, up);
   if (!r.T.matrix().allFinite()) return false;
   if (support && offSupport(m, r.T, *support, cfg)) return false;
   auto score = [&](const Eigen::Isometry3f& T, PartDetection* out) {
@@ -83,13 +109,35 @@ bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const Mat
   before.unseen = 0;
   before.continuation = 0;
   if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(before, cfg)) {
-    const Eigen::Isometry3f T = (r.T.cast<double>() * centreInSlack(m, r.polished, r.polished_fresh, cfg).inverse()).cast<float>();
+    Eigen::Vector3d up_model;
+    if (up) up_model = (r.T.linear().cast<double>().transpose() * *up).normalized();
+    const Eigen::Isometry3d D = centreInSlack(m, r.polished, r.polished_fresh, cfg, up ? &up_model : nullptr);
+    const Eigen::Isometry3f T = (r.T.cast<double>() * D.inverse()).cast<float>();
     PartDetection centred;
     if (T.matrix().allFinite() && !(support && offSupport(m, T, *support, cfg))) {
       score(T, &centred);
       if (accepted(centred, cfg)) *c = centred;
     }
   }
+  return true;
+}
+
+bool finishPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                const Eigen::Vector4f* support, const PartDetection& d, const Eigen::Isometry3f& T0, size_t points,
+                bool polish, PartDetection* c) {
+  if (!polishAndCentre(s, m, cfg, support, d, T0, points, polish, nullptr, c)) return false;
+  // A part lying on the support lies in one of its rests. A pose a little tilted from one is
+  // laid into it and polished again with the tilt held; it replaces the free pose where it is
+  // accepted and fits about as closely (the free pose refused: where it is accepted).
+  Eigen::Isometry3f Tr;
+  if (!polish || !support || !(cfg.rest_snap_angle > 0) ||
+      !layIntoRest(m, c->pose.cast<float>(), *support, cfg.rest_snap_min_angle, cfg.rest_snap_angle, &Tr))
+    return true;
+  const Eigen::Vector3d up = support->head<3>().cast<double>().normalized();
+  PartDetection rested;
+  if (!polishAndCentre(s, m, cfg, support, d, Tr, points, true, &up, &rested)) return true;
+  const bool keep = accepted(rested, cfg) && (!accepted(*c, cfg) || rested.rmse <= cfg.rest_snap_rmse_ratio * c->rmse);
+  if (keep) *c = rested;
   return true;
 }
 

@@ -108,6 +108,13 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   if (!(c.rest_yaw_step >= 0.01 && c.rest_yaw_step <= M_PI)) m.fail("rest_yaw_step", "must be in [0.01, pi] rad");
   c.rest_end_ratio = m.getDouble("rest_end_ratio", c.rest_end_ratio);
   if (!(c.rest_end_ratio == 0 || c.rest_end_ratio >= 1)) m.fail("rest_end_ratio", "must be 0 (off) or >= 1");
+  c.rest_snap_angle = m.getDouble("rest_snap_angle", c.rest_snap_angle);
+  if (!(c.rest_snap_angle >= 0 && c.rest_snap_angle <= 0.35)) m.fail("rest_snap_angle", "must be in [0, 0.35] rad (0: off)");
+  c.rest_snap_min_angle = m.getDouble("rest_snap_min_angle", c.rest_snap_min_angle);
+  if (!(c.rest_snap_min_angle >= 0 && c.rest_snap_min_angle <= c.rest_snap_angle + 1e-12) && c.rest_snap_angle > 0)
+    m.fail("rest_snap_min_angle", "must be in [0, rest_snap_angle] rad");
+  c.rest_snap_rmse_ratio = m.getDouble("rest_snap_rmse_ratio", c.rest_snap_rmse_ratio);
+  if (!(c.rest_snap_rmse_ratio >= 1)) m.fail("rest_snap_rmse_ratio", "must be >= 1");
   positive("icp_spacing", c.icp_spacing);
   c.icp_iterations = m.getInt("icp_iterations", c.icp_iterations);
   positive("icp_max_points", c.icp_max_points);

@@ -287,14 +287,16 @@ ClosestPoint meshClosest(const ModelMatcher::ModelIndex& m, const Eigen::Vector3
 /// Robust point-to-plane ICP of the scene points onto the model (Huber weights, shrinking
 /// correspondence distance); distance-field correspondences, then exact ones.
 /// `max_points`: the scene points used (evenly thinned); `polish`: finish with exact neighbours.
+/// `up` (scene frame, unit): the pose's tilt is held, its steps turn about `up` only.
 Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T0,
-            const MatchingConfig& cfg, size_t max_points, bool polish);
+            const MatchingConfig& cfg, size_t max_points, bool polish, const Eigen::Vector3d* up = nullptr);
 
 // ---- slack_centring.cpp
 /// Centres a polished pose in the slack its scanned faces leave (see slack_centring.cpp).
 /// Rotates the rows with the pose; returns the change (model frame, applied after X).
+/// `up` (model frame, unit): only turns about it and translations are followed (tilt held).
 Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<PolishRow>& rows, bool fresh,
-                                const MatchingConfig& cfg);
+                                const MatchingConfig& cfg, const Eigen::Vector3d* up = nullptr);
 
 // ---- validation.cpp
 /// Share of the coarse scene points within r of the model under T.

@@ -47,7 +47,7 @@ void dropUnseenFaces(const ModelMatcher::ModelIndex& m, const MatchingConfig& cf
 /// turn about an axis of symmetry) is left alone. Rotates the rows with the pose; returns the
 /// change (model frame, applied after X).
 Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<PolishRow>& rows, bool fresh,
-                                const MatchingConfig& cfg) {
+                                const MatchingConfig& cfg, const Eigen::Vector3d* up) {
   Eigen::Isometry3d total = Eigen::Isometry3d::Identity();
   if (rows.size() < 20 || m.faces.groups.empty()) return total;
   const double L = std::max(0.5 * static_cast<double>(m.diameter), 1e-3);
@@ -80,19 +80,27 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
     J << r.q.cross(r.n) / L, r.n;
     A += J * J.transpose();
   }
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eig(A);
+  // tilt held: only the turn about `up` and the translations are followed
+  Eigen::Matrix<double, 6, Eigen::Dynamic> B = Eigen::Matrix<double, 6, 6>::Identity();
+  if (up) {
+    B = Eigen::Matrix<double, 6, 4>::Zero();
+    B.block<3, 1>(0, 0) = up->normalized();
+    B.block<3, 3>(3, 1) = Eigen::Matrix3d::Identity();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(B.transpose() * A * B);
+  const Eigen::MatrixXd dirs = B * eig.eigenvectors();
   const double top = eig.eigenvalues().maxCoeff();
   if (!(top > 0)) return total;
   // the k-th point leaving ends the slack: a few stray points do not
   const size_t k = std::max<size_t>(static_cast<size_t>(cfg.icp_slack_points), rows.size() / 500);
   for (int pass = 0; pass < 2; ++pass) {
-    for (int e = 0; e < 6; ++e) {
+    for (int e = 0; e < static_cast<int>(dirs.cols()); ++e) {
       if (eig.eigenvalues()[e] > cfg.icp_slack_eigen_ratio * top) continue;
-      const Eigen::Vector3d w = eig.eigenvectors().col(e).head<3>() / L, t = eig.eigenvectors().col(e).tail<3>();
+      const Eigen::Vector3d w = dirs.col(e).head<3>() / L, t = dirs.col(e).tail<3>();
       // a turn about an axis of symmetry (a sphere: any turn about its centre) moves nothing
       if (m.info.symmetry.type == Symmetry::Type::kSpherical && (w.cross(m.centroid) + t).norm() < 0.5 * w.norm() * L) continue;
       if (m.info.symmetry.type == Symmetry::Type::kAxial &&
-          std::abs(w.dot(m.info.symmetry.axis.normalized())) * L > 0.9 * eig.eigenvectors().col(e).norm()) continue;
+          std::abs(w.dot(m.info.symmetry.axis.normalized())) * L > 0.9 * dirs.col(e).norm()) continue;
       // Each way: the motion at which the k-th point leaves. A first-order guess for every point
       // (off its face's plane, or across one of the face's creases) brackets it; the exact
       // closest point then decides, for the points the guess puts inside the bracket (a point
