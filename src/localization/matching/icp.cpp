@@ -13,13 +13,10 @@ ClosestPoint meshClosest(const ModelMatcher::ModelIndex& m, const Eigen::Vector3
   return c;
 }
 
-/// The directions an ICP step may take (columns, orthonormal, in the step's scaled coordinates:
-/// turn × half the diameter, then translation): all six, or with `up` (scene frame) the turn
-/// about it (seen in the model frame through X, scene → model) and the three translations.
-static Eigen::Matrix<double, 6, Eigen::Dynamic> stepBasis(const Eigen::Isometry3d& X, const Eigen::Vector3d* up) {
+Eigen::Matrix<double, 6, Eigen::Dynamic> stepBasis(const Eigen::Vector3d* up) {
   if (!up) return Eigen::Matrix<double, 6, 6>::Identity();
   Eigen::Matrix<double, 6, 4> B = Eigen::Matrix<double, 6, 4>::Zero();
-  B.block<3, 1>(0, 0) = (X.linear() * *up).normalized();
+  B.block<3, 1>(0, 0) = up->normalized();
   B.block<3, 3>(3, 1) = Eigen::Matrix3d::Identity();
   return B;
 }
@@ -120,7 +117,9 @@ Refined icp(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::
     const Eigen::Matrix<double, 6, 6> As = scale.asDiagonal().inverse() * A * scale.asDiagonal().inverse();
     // tilt held: steps lie in the span of the turn about the support's normal (in the model
     // frame at the current pose) and the three translations
-    const Eigen::Matrix<double, 6, Eigen::Dynamic> B = stepBasis(X, up);
+    Eigen::Vector3d up_model;
+    if (up) up_model = X.linear() * *up;  // X: scene → model
+    const Eigen::Matrix<double, 6, Eigen::Dynamic> B = stepBasis(up ? &up_model : nullptr);
     const Eigen::MatrixXd Ab = B.transpose() * As * B;
     const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Ab);
     const double floor_ev = degenerate_ratio * eig.eigenvalues().maxCoeff();

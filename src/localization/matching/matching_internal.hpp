@@ -284,6 +284,10 @@ std::vector<Hypothesis> ransac(const SceneData& s, const ModelMatcher::ModelInde
 // ---- icp.cpp
 /// The mesh's closest point to q (model frame) within max_d: the candidate grid, else Embree.
 ClosestPoint meshClosest(const ModelMatcher::ModelIndex& m, const Eigen::Vector3f& q, float max_d);
+/// The directions a pose step may take (orthonormal columns in the steps' scaled coordinates:
+/// turn × half the diameter, then translation): all six, or with `up` (model frame) the turn
+/// about it and the three translations.
+Eigen::Matrix<double, 6, Eigen::Dynamic> stepBasis(const Eigen::Vector3d* up);
 /// Robust point-to-plane ICP of the scene points onto the model (Huber weights, shrinking
 /// correspondence distance); distance-field correspondences, then exact ones.
 /// `max_points`: the scene points used (evenly thinned); `polish`: finish with exact neighbours.

@@ -81,12 +81,7 @@ Eigen::Isometry3d centreInSlack(const ModelMatcher::ModelIndex& m, std::vector<P
     A += J * J.transpose();
   }
   // tilt held: only the turn about `up` and the translations are followed
-  Eigen::Matrix<double, 6, Eigen::Dynamic> B = Eigen::Matrix<double, 6, 6>::Identity();
-  if (up) {
-    B = Eigen::Matrix<double, 6, 4>::Zero();
-    B.block<3, 1>(0, 0) = up->normalized();
-    B.block<3, 3>(3, 1) = Eigen::Matrix3d::Identity();
-  }
+  const Eigen::Matrix<double, 6, Eigen::Dynamic> B = stepBasis(up);
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(B.transpose() * A * B);
   const Eigen::MatrixXd dirs = B * eig.eigenvectors();
   const double top = eig.eigenvalues().maxCoeff();
