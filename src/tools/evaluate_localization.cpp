@@ -256,7 +256,7 @@ int runOutliers(const Options& o) {
 struct ScoredDetection {
   std::string model;
   Eigen::Isometry3d pose;
-  double fitness = 0, coverage = 0, rmse = 0, see_through = 0, unseen = 0, continuation = 0;
+  double fitness = 0, coverage = 0, rmse = 0, see_through = 0, unseen = 0, continuation = 0, overhang = 0;
   double alternative_score_share = 0;             ///< PartDetection's (0: none fits as closely, or turns not scored)
   std::vector<Eigen::Isometry3d> ambiguous_poses{};  ///< PartDetection's (empty: not ambiguous)
 };
@@ -309,6 +309,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
       p["coverage"] = dets[bi].coverage;
       p["rmse_mm"] = dets[bi].rmse * 1e3;
       p["see_through"] = dets[bi].see_through;
+      p["overhang"] = dets[bi].overhang;
       p["unseen"] = dets[bi].unseen;
       p["continuation"] = dets[bi].continuation;
       p["pose"] = cellsight_tools::poseToJson(dets[bi].pose);
@@ -335,7 +336,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
     ++counts->fp;
     const Eigen::Vector3d at = dets[i].pose * centroids.centroid(dets[i].model);
     json f = {{"model", dets[i].model},       {"fitness", dets[i].fitness}, {"coverage", dets[i].coverage},
-              {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through}, {"unseen", dets[i].unseen},
+              {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through}, {"overhang", dets[i].overhang}, {"unseen", dets[i].unseen},
               {"continuation", dets[i].continuation}, {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)},
               {"detection", i}};
     addAmbiguity(dets[i], lib.model(dets[i].model).info, centroids.centroid(dets[i].model), &f);
@@ -478,7 +479,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   std::vector<ScoredDetection> dets;
   for (const auto& d : found)
     dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through, d.unseen, d.continuation,
-                    d.alternative_score_share, d.ambiguous_poses});
+                    d.overhang, d.alternative_score_share, d.ambiguous_poses});
   json sj = scoreDetections(scene, lib, matcher, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, counts, terr, rerr);
   // a missed part: the pose of its model nearest the truth that validation refused, with the
   // figures it failed on
@@ -493,7 +494,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
         if (e.translation >= nearest) continue;
         nearest = e.translation;
         p["nearest_rejected"] = {{"fitness", r.fitness},       {"coverage", r.coverage},
-                                 {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through}, {"unseen", r.unseen},
+                                 {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through}, {"overhang", r.overhang}, {"unseen", r.unseen},
                                  {"continuation", r.continuation}, {"cluster", r.cluster},       {"t_err_mm", e.translation * 1e3},
                                  {"r_err_deg", e.rotation / kDeg},
                                  {"refused_by", r.refused_by},
@@ -523,6 +524,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
                               {"coverage", r.coverage},
                               {"rmse_mm", r.rmse * 1e3},
                               {"see_through", r.see_through},
+                              {"overhang", r.overhang},
                               {"unseen", r.unseen},
                               {"continuation", r.continuation},
                               {"refused_by", r.refused_by},

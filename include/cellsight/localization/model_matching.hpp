@@ -182,6 +182,16 @@ struct MatchingConfig {
   /// behind them (locate() given the support's points): a part fitted onto a smaller object
   /// overhangs it, and the table was seen under the overhang. 1: off.
   double max_see_through = 1.0;
+  /// At most this share of the model's visible points (PartDetection::overhang) may lie where the
+  /// camera's ray past the point ends within overhang_table_radius of a support point the
+  /// clustering kept, with no scan point within overhang_clearance of the point itself: the camera
+  /// measured the table where the part would hide it. The see-through test's map is eroded by a
+  /// cell and the unseen test leaves unseen_radius to a scanner's lost edges; this test reads the
+  /// support's points themselves and asks the clearance instead, so it sees a part fitted onto a
+  /// smaller object that overhangs it by a few millimetres. Needs the support's points; 1: off.
+  double max_overhang = 1.0;
+  double overhang_clearance = 0.002;     ///< m
+  double overhang_table_radius = 0.001;  ///< m
   /// At most this share of the model's visible points may be surface the scan should have
   /// measured and did not (PartDetection::unseen): seen by the camera and lit by the sheet, both
   /// within unseen_view_angle of the normal, farther than unseen_radius from every scan point and
@@ -254,6 +264,9 @@ struct PartDetection {
   /// share of the model's visible points through which the camera saw the support behind
   /// (free-space violation; 0 when locate() had no support points)
   double see_through = 0;
+  /// share of the model's visible points the camera saw past to a measured support point, with no
+  /// scan point near them (MatchingConfig::max_overhang; 0 when locate() had no support points)
+  double overhang = 0;
   /// share of the model's visible points the scan should have measured and did not (see
   /// MatchingConfig::max_unseen; computed for poses that pass every other test, the fitness test at
   /// half of min_fitness, with a light sweep; 0 otherwise)

@@ -98,7 +98,7 @@ bool polishAndCentre(const SceneData& s, const ModelMatcher::ModelIndex& m, cons
     out->pose = T.cast<double>();
     out->rmse = r.rmse;
     out->coverage = coverage(s, m, T, cfg.fitness_radius);
-    out->fitness = visibleFitness(s, m, T, cfg, &out->see_through);
+    out->fitness = visibleFitness(s, m, T, cfg, &out->see_through, nullptr, &out->overhang);
     out->score = out->fitness * (cfg.min_coverage > 0 ? out->coverage : 1.0);
     traceSurfaceTests(s, m, T, cfg, support, out);
   };
@@ -108,6 +108,7 @@ bool polishAndCentre(const SceneData& s, const ModelMatcher::ModelIndex& m, cons
   PartDetection before = *c;
   before.unseen = 0;
   before.continuation = 0;
+  before.overhang = 0;
   if (polish && cfg.icp_centre_slack && !r.polished.empty() && accepted(before, cfg)) {
     Eigen::Vector3d up_model;
     if (up) up_model = (r.T.linear().cast<double>().transpose() * *up).normalized();

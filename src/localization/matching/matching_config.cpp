@@ -161,6 +161,9 @@ MatchingConfig loadMatchingConfig(const std::string& path) {
   c.max_support_gap = m.getDouble("max_support_gap", c.max_support_gap);
   if (!(c.max_support_gap >= 0)) m.fail("max_support_gap", "must be >= 0 (0: off)");
   share("max_see_through", c.max_see_through);
+  share("max_overhang", c.max_overhang);
+  positive("overhang_clearance", c.overhang_clearance);
+  positive("overhang_table_radius", c.overhang_table_radius);
   share("max_unseen", c.max_unseen);
   share("max_continuation", c.max_continuation);
   positive("continuation_reach", c.continuation_reach);

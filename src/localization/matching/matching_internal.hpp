@@ -166,9 +166,12 @@ struct SupportSeen {
   Eigen::Vector2f lo = Eigen::Vector2f::Zero();
   int nu = 0, nv = 0;
   std::vector<uint8_t> seen;
+  PointGrid points;  ///< the support's points themselves
   bool empty() const { return seen.empty(); }
   /// the view ray eye → p meets the plane on a seen cell (p above the plane by > min_height)
   bool seenBehind(const Vec3& eye, const Vec3& p, float min_height) const;
+  /// the view ray eye → p meets the plane within r of a support point (p above it by > min_height)
+  bool measuredBehind(const Vec3& eye, const Vec3& p, float min_height, float r) const;
 };
 SupportSeen buildSupportSeen(const std::vector<Vec3>& points, const Eigen::Vector4f& plane, float cell);
 
@@ -310,10 +313,13 @@ double coverage(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eig
 /// see_through (optional): share of those visible points whose view ray runs on to seen support.
 /// unseen (optional; 0 without a light sweep or a scene grid): share of those visible points the
 /// scan should have measured and did not (MatchingConfig::max_unseen).
+/// overhang (optional; 0 without support points): share of those visible points whose view ray
+/// runs on to a measured support point, with no scan point near them (MatchingConfig::max_overhang).
 /// With cfg.fitness_incidence_mid > 0 the share weighs each visible point by the scanner's
 /// response at its camera incidence (see_through and unseen count them alike).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg, double* see_through = nullptr, double* unseen = nullptr);
+                      const MatchingConfig& cfg, double* see_through = nullptr, double* unseen = nullptr,
+                      double* overhang = nullptr);
 /// Cluster points (s.coarse) carrying on a face of the model under T past its edge, per cluster
 /// point the model explains (MatchingConfig::max_continuation); support: points within
 /// continuation_reach of it are left out.

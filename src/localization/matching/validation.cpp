@@ -68,7 +68,14 @@ SupportSeen buildSupportSeen(const std::vector<Vec3>& points, const Eigen::Vecto
       g.seen[static_cast<size_t>(j) * g.nu + i] = all;
     }
   }
+  g.points = PointGrid(points, cell);
   return g;
+}
+
+bool SupportSeen::measuredBehind(const Vec3& eye, const Vec3& p, float min_height, float r) const {
+  const float hp = n.dot(p) + d, he = n.dot(eye) + d;
+  if (hp <= min_height || he <= hp || points.size() == 0) return false;
+  return points.anyWithin(p + (p - eye) * (hp / (he - hp)), r);
 }
 
 bool SupportSeen::seenBehind(const Vec3& eye, const Vec3& p, float min_height) const {
@@ -90,14 +97,14 @@ constexpr float kSameFace = 0.7f;
 /// itself) and, with s.light, lit by the sheet (facing its emitter, not shadowed by the part
 /// itself) that have a scene point within r_F (of every cluster of the call when s.whole is set).
 double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
-                      const MatchingConfig& cfg, double* see_through, double* unseen) {
+                      const MatchingConfig& cfg, double* see_through, double* unseen, double* overhang) {
   const Eigen::Isometry3f Ti = T.inverse();
   const Vec3 eye = Ti * cfg.viewpoint;
   const float cos_max = std::cos(static_cast<float>(cfg.max_view_angle));
   const float r2 = static_cast<float>(cfg.fitness_radius * cfg.fitness_radius);
   std::vector<int> idx(1);
   std::vector<float> d2(1);
-  size_t visible = 0, matched = 0, through = 0;
+  size_t visible = 0, matched = 0, through = 0, over = 0;
   // the scanner's response at the point's camera incidence (1: every visible point alike)
   const bool weigh = cfg.fitness_incidence_mid > 0;
   const float mid = static_cast<float>(cfg.fitness_incidence_mid);
@@ -107,6 +114,9 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   // the unseen test: scan points (every cluster's) searched along the camera's ray and the beam
   const PointGrid* scan = s.whole ? s.whole : cfg.scene_search == "grid" ? &s.grid : nullptr;
   if (unseen) *unseen = 0;
+  const PointGrid* all_scan = s.whole ? s.whole : cfg.scene_search == "grid" ? &s.grid : nullptr;
+  const bool test_over = overhang && s.support_seen && s.support_seen->points.size() > 0 && all_scan;
+  const float r_clear = static_cast<float>(cfg.overhang_clearance), r_table = static_cast<float>(cfg.overhang_table_radius);
   if (!s.light || !cfg.check_visibility) scan = nullptr;
   const bool test_unseen = unseen && scan;
   const float cos_unseen = std::cos(static_cast<float>(cfg.unseen_view_angle));
@@ -176,6 +186,11 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     if (test_unseen) state[i] = 1;
     const Vec3 p = T * mp[i];
     if (seen && seen->seenBehind(cfg.viewpoint, p, min_height)) ++through;
+    // (a point the camera sees squarely: near a steep face's foot the table is measured within
+    // overhang_table_radius of where a grazing ray through the face would meet it)
+    if (test_over && -mn[i].dot((mp[i] - eye).normalized()) >= cos_unseen && !all_scan->anyWithin(p, r_clear) &&
+        s.support_seen->measuredBehind(cfg.viewpoint, p, min_height, r_table))
+      ++over;
     bool hit = false;
     if (s.whole) {
       hit = s.whole->anyWithin(p, static_cast<float>(cfg.fitness_radius));
@@ -208,6 +223,7 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
     missed += inside;
   }
   if (see_through) *see_through = visible ? static_cast<double>(through) / visible : 0.0;
+  if (overhang) *overhang = visible ? static_cast<double>(over) / visible : 0.0;
   if (unseen) *unseen = visible ? static_cast<double>(missed) / visible : 0.0;
   if (weigh) return weight_visible > 0 ? weight_matched / weight_visible : 0.0;
   return visible ? static_cast<double>(matched) / visible : 0.0;
@@ -274,6 +290,7 @@ void failedTests(const PartDetection& d, const MatchingConfig& cfg, double min_f
   if (!(d.rmse <= cfg.max_rmse)) fail("rmse %.3f mm > max_rmse %.3f mm", d.rmse * 1e3, cfg.max_rmse * 1e3);
   if (!(d.see_through <= cfg.max_see_through))
     fail("see-through %.3f > max_see_through %.3f", d.see_through, cfg.max_see_through);
+  if (!(d.overhang <= cfg.max_overhang)) fail("overhang %.3f > max_overhang %.3f", d.overhang, cfg.max_overhang);
   if (!(d.unseen <= cfg.max_unseen)) fail("unseen %.3f > max_unseen %.3f", d.unseen, cfg.max_unseen);
   if (!(cfg.max_continuation >= 1 || d.continuation <= cfg.max_continuation))
     fail("continuation %.4f > max_continuation %.4f", d.continuation, cfg.max_continuation);
