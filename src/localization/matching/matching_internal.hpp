@@ -172,6 +172,9 @@ struct SupportSeen {
   bool seenBehind(const Vec3& eye, const Vec3& p, float min_height) const;
   /// the view ray eye → p meets the plane within r of a support point (p above it by > min_height)
   bool measuredBehind(const Vec3& eye, const Vec3& p, float min_height, float r) const;
+  /// the view ray eye → p continued to the plane, at *q (false: p within min_height of the plane,
+  /// or the eye not above it)
+  bool behind(const Vec3& eye, const Vec3& p, float min_height, Vec3* q) const;
 };
 SupportSeen buildSupportSeen(const std::vector<Vec3>& points, const Eigen::Vector4f& plane, float cell);
 

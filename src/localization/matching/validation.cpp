@@ -72,16 +72,21 @@ SupportSeen buildSupportSeen(const std::vector<Vec3>& points, const Eigen::Vecto
   return g;
 }
 
-bool SupportSeen::measuredBehind(const Vec3& eye, const Vec3& p, float min_height, float r) const {
+bool SupportSeen::behind(const Vec3& eye, const Vec3& p, float min_height, Vec3* q) const {
   const float hp = n.dot(p) + d, he = n.dot(eye) + d;
-  if (hp <= min_height || he <= hp || points.size() == 0) return false;
-  return points.anyWithin(p + (p - eye) * (hp / (he - hp)), r);
+  if (hp <= min_height || he <= hp) return false;  // low, or the eye is not above the point
+  *q = p + (p - eye) * (hp / (he - hp));
+  return true;
+}
+
+bool SupportSeen::measuredBehind(const Vec3& eye, const Vec3& p, float min_height, float r) const {
+  Vec3 q;
+  return points.size() > 0 && behind(eye, p, min_height, &q) && points.anyWithin(q, r);
 }
 
 bool SupportSeen::seenBehind(const Vec3& eye, const Vec3& p, float min_height) const {
-  const float hp = n.dot(p) + d, he = n.dot(eye) + d;
-  if (hp <= min_height || he <= hp) return false;  // low, or the eye is not above the point
-  const Vec3 q = p + (p - eye) * (hp / (he - hp));  // the ray eye → p continued to the plane
+  Vec3 q;
+  if (!behind(eye, p, min_height, &q)) return false;
   const int i = static_cast<int>(std::floor((u.dot(q) - lo.x()) / cell));
   const int j = static_cast<int>(std::floor((v.dot(q) - lo.y()) / cell));
   return i >= 0 && j >= 0 && i < nu && j < nv && seen[static_cast<size_t>(j) * nu + i] != 0;
@@ -111,10 +116,11 @@ double visibleFitness(const SceneData& s, const ModelMatcher::ModelIndex& m, con
   const float width = static_cast<float>(cfg.fitness_incidence_width);
   double weight_visible = 0, weight_matched = 0;
   const SupportSeen* seen = see_through && s.support_seen && !s.support_seen->empty() ? s.support_seen : nullptr;
-  // the unseen test: scan points (every cluster's) searched along the camera's ray and the beam
-  const PointGrid* scan = s.whole ? s.whole : cfg.scene_search == "grid" ? &s.grid : nullptr;
-  if (unseen) *unseen = 0;
+  // the scan points (every cluster's): the overhang test's clearance; the unseen test searches
+  // them along the camera's ray and the beam too
   const PointGrid* all_scan = s.whole ? s.whole : cfg.scene_search == "grid" ? &s.grid : nullptr;
+  const PointGrid* scan = all_scan;
+  if (unseen) *unseen = 0;
   const bool test_over = overhang && s.support_seen && s.support_seen->points.size() > 0 && all_scan;
   const float r_clear = static_cast<float>(cfg.overhang_clearance), r_table = static_cast<float>(cfg.overhang_table_radius);
   if (!s.light || !cfg.check_visibility) scan = nullptr;
