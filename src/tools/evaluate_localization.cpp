@@ -77,6 +77,9 @@ struct Options {
   std::vector<double> ratios;
   std::string detections, cloud, calibration;
   std::string trajectory = "demo_sweep";  ///< cells: the scan's trajectory (config/trajectories.yaml)
+  /// cells: a second scan's trajectory (empty: none), located on its own and merged
+  /// (ModelMatcher::mergePasses)
+  std::string second_pass;
   double limit_rms_mm = 0, limit_t_mm = 0, limit_r_deg = 0, limit_recall = 0;  ///< cells: 0 = no limit
   std::string dump_clusters;  ///< cells, cloud: write each scene's clusters as PLY here
   /// `value`, or `<root>/<relative>` when not given
@@ -259,6 +262,7 @@ struct ScoredDetection {
   double fitness = 0, coverage = 0, rmse = 0, see_through = 0, unseen = 0, continuation = 0, overhang = 0;
   double alternative_score_share = 0;             ///< PartDetection's (0: none fits as closely, or turns not scored)
   std::vector<Eigen::Isometry3d> ambiguous_poses{};  ///< PartDetection's (empty: not ambiguous)
+  int pass = 0;                                   ///< PartDetection's: the scan it was found on
 };
 
 /// The matcher's word on a detection's turns (PartDetection::ambiguous_poses), for the JSON:
@@ -313,6 +317,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
       p["unseen"] = dets[bi].unseen;
       p["continuation"] = dets[bi].continuation;
       p["pose"] = cellsight_tools::poseToJson(dets[bi].pose);
+      p["pass"] = dets[bi].pass;
       addAmbiguity(dets[bi], lib.model(o.model).info, c, &p);
       counts->ambiguous_tp += !dets[bi].ambiguous_poses.empty();
       terr->push_back(be.translation * 1e3);
@@ -338,7 +343,7 @@ json scoreDetections(const Scene& scene, const ModelLibrary& lib, const ModelMat
     json f = {{"model", dets[i].model},       {"fitness", dets[i].fitness}, {"coverage", dets[i].coverage},
               {"rmse_mm", dets[i].rmse * 1e3}, {"see_through", dets[i].see_through}, {"overhang", dets[i].overhang}, {"unseen", dets[i].unseen},
               {"continuation", dets[i].continuation}, {"at", {at.x(), at.y(), at.z()}},  {"pose", cellsight_tools::poseToJson(dets[i].pose)},
-              {"detection", i}};
+              {"detection", i}, {"pass", dets[i].pass}};
     addAmbiguity(dets[i], lib.model(dets[i].model).info, centroids.centroid(dets[i].model), &f);
     if (!dets[i].ambiguous_poses.empty()) {
       ++counts->ambiguous_fp;
@@ -449,37 +454,79 @@ void describeScanPoints(const Scene& scene, const ModelLibrary& lib, const ScanC
   }
 }
 
-/// A finished scan (cropped and filtered as the nodes do) clustered and located as the nodes do,
-/// scored against the scene's truth.
-json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibrary& lib, ModelMatcher& matcher,
-                    const ClusteringConfig& ccfg, const Options& o, DetectionCounts* counts, std::vector<double>* terr,
-                    std::vector<double>* rerr, const LightSweep* light = nullptr, const std::vector<int>* on_object = nullptr) {
-  const ClusteringResult cr = clusterScene(cloud, ccfg);
+/// One finished scan of a cell (cropped and filtered as the nodes do), the sweep that lit it and,
+/// for scoring only, the object each of its points lies on (SurfaceDistance::stats).
+struct PassScan {
+  const ScanCloud* cloud = nullptr;
+  const LightSweep* light = nullptr;
+  const std::vector<int>* on_object = nullptr;
+};
+
+/// A scan clustered and located as the nodes do.
+struct PassResult {
+  std::vector<PartDetection> found;
+  MatchStats stats;
+  std::vector<size_t> cluster_sizes;
+  std::vector<Eigen::Vector3f> support_points;  ///< the table points the scan measured (ClusteringResult's)
+};
+
+/// `other_support`: table points another scan of the cell measured, added to this scan's for the
+/// free-space tests (the cell stands still between passes: where either scan saw the table, no
+/// part is).
+PassResult locatePass(const Scene& scene, const PassScan& scan, ModelMatcher& matcher, const ClusteringConfig& ccfg,
+                      const Options& o, const std::string& suffix,
+                      const std::vector<Eigen::Vector3f>* other_support = nullptr) {
+  ClusteringResult cr = clusterScene(*scan.cloud, ccfg);
+  PassResult r;
+  r.support_points = cr.support_points;
+  if (other_support) cr.support_points.insert(cr.support_points.end(), other_support->begin(), other_support->end());
   std::vector<ScanCloud> clusters;
   for (const auto& c : cr.clusters) clusters.push_back(c.cloud);
   if (!o.dump_clusters.empty()) {  // what the matcher was given, for a look in a viewer
     makeDirs(o.dump_clusters);
-    for (size_t i = 0; i < clusters.size(); ++i)
-      saveCloud(o.dump_clusters + "/" + scene.name + "_cluster_" + std::to_string(i) + ".ply", clusters[i]);
+    const std::string stem = o.dump_clusters + "/" + scene.name + suffix;
+    for (size_t i = 0; i < clusters.size(); ++i) saveCloud(stem + "_cluster_" + std::to_string(i) + ".ply", clusters[i]);
     ScanCloud support;  // the table points the free-space test (max_see_through) reads
     for (const auto& p : cr.support_points) support.append(p, 0.f);
-    saveCloud(o.dump_clusters + "/" + scene.name + "_support.ply", support);
+    saveCloud(stem + "_support.ply", support);
     ScanCloud fragments;  // unclustered points: evidence for the fitness and unseen tests only
     for (const auto& p : cr.fragments) fragments.append(p, 0.f);
-    if (fragments.size() > 0) saveCloud(o.dump_clusters + "/" + scene.name + "_fragments.ply", fragments);
+    if (fragments.size() > 0) saveCloud(stem + "_fragments.ply", fragments);
     // the sweep the illumination and unseen tests read
-    if (light) saveSweep(o.dump_clusters + "/" + scene.name + "_sweep.txt", *light);
+    if (scan.light) saveSweep(stem + "_sweep.txt", *scan.light);
   }
   const Eigen::Vector3f eye = scene.scanner_camera.T_base_camera.translation().cast<float>();
   const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
                                 static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
-  MatchStats st;
-  const auto found = matcher.locate(clusters, {}, &st, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, light,
-                                    &cr.fragments);
+  r.found = matcher.locate(clusters, {}, &r.stats, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, scan.light,
+                           &cr.fragments);
+  for (const auto& c : clusters) r.cluster_sizes.push_back(c.size());
+  return r;
+}
+
+/// A finished scan clustered and located as the nodes do, scored against the scene's truth; with
+/// `second`, a second scan of the cell located alike and merged (ModelMatcher::mergePasses).
+json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibrary& lib, ModelMatcher& matcher,
+                    const ClusteringConfig& ccfg, const Options& o, DetectionCounts* counts, std::vector<double>* terr,
+                    std::vector<double>* rerr, const LightSweep* light = nullptr, const std::vector<int>* on_object = nullptr,
+                    const PassScan* second = nullptr) {
+  PassResult first = locatePass(scene, {&cloud, light, on_object}, matcher, ccfg, o, "");
+  MatchStats& st = first.stats;
+  std::vector<PartDetection> found = first.found;
+  PassResult other;
+  if (second) {
+    other = locatePass(scene, *second, matcher, ccfg, o, "_pass2", &first.support_points);
+    found = matcher.mergePasses(first.found, other.found, &st);
+    for (auto r : other.stats.rejected) {
+      r.pass = 1;
+      st.rejected.push_back(std::move(r));
+    }
+    st.seconds += other.stats.seconds;
+  }
   std::vector<ScoredDetection> dets;
   for (const auto& d : found)
     dets.push_back({d.model, d.pose, d.fitness, d.coverage, d.rmse, d.see_through, d.unseen, d.continuation,
-                    d.overhang, d.alternative_score_share, d.ambiguous_poses});
+                    d.overhang, d.alternative_score_share, d.ambiguous_poses, d.pass});
   json sj = scoreDetections(scene, lib, matcher, dets, o.max_t_mm * 1e-3, o.max_r_deg * kDeg, counts, terr, rerr);
   // a missed part: the pose of its model nearest the truth that validation refused, with the
   // figures it failed on
@@ -495,7 +542,8 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
         nearest = e.translation;
         p["nearest_rejected"] = {{"fitness", r.fitness},       {"coverage", r.coverage},
                                  {"rmse_mm", r.rmse * 1e3},    {"see_through", r.see_through}, {"overhang", r.overhang}, {"unseen", r.unseen},
-                                 {"continuation", r.continuation}, {"cluster", r.cluster},       {"t_err_mm", e.translation * 1e3},
+                                 {"continuation", r.continuation}, {"cluster", r.cluster},       {"pass", r.pass},
+                                 {"t_err_mm", e.translation * 1e3},
                                  {"r_err_deg", e.rotation / kDeg},
                                  {"refused_by", r.refused_by},
                                  {"pose", cellsight_tools::poseToJson(r.pose)}};
@@ -508,7 +556,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   std::vector<const PartDetection*> listed;  // a cluster searched again (half the coverage) refuses the same pose twice
   for (const auto& r : st.rejected) {
     if (std::any_of(listed.begin(), listed.end(), [&](const PartDetection* l) {
-          return l->model == r.model && l->cluster == r.cluster && l->pose.isApprox(r.pose, 1e-9);
+          return l->model == r.model && l->cluster == r.cluster && l->pass == r.pass && l->pose.isApprox(r.pose, 1e-9);
         }))
       continue;
     listed.push_back(&r);
@@ -520,6 +568,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
     }
     sj["rejected"].push_back({{"model", r.model},
                               {"cluster", r.cluster},
+                              {"pass", r.pass},
                               {"fitness", r.fitness},
                               {"coverage", r.coverage},
                               {"rmse_mm", r.rmse * 1e3},
@@ -530,11 +579,27 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
                               {"refused_by", r.refused_by},
                               {"right", t_err <= o.max_t_mm * 1e-3 && r_err <= o.max_r_deg * kDeg}});
   }
-  if (on_object) describeScanPoints(scene, lib, cloud, *on_object, dets, &sj);
-  sj["cluster_sizes"] = json::array();
-  for (const auto& c : clusters) sj["cluster_sizes"].push_back(c.size());
+  if (on_object && second && second->on_object) {  // what either scan measured of each part
+    ScanCloud both = cloud;
+    std::vector<int> on = *on_object;
+    on.resize(cloud.size(), -1);
+    for (size_t i = 0; i < second->cloud->size(); ++i) both.append(second->cloud->points[i], 0.f);
+    on.insert(on.end(), second->on_object->begin(), second->on_object->end());
+    describeScanPoints(scene, lib, both, on, dets, &sj);
+  } else if (on_object) {
+    describeScanPoints(scene, lib, cloud, *on_object, dets, &sj);
+  }
+  sj["cluster_sizes"] = first.cluster_sizes;
   sj["points"] = cloud.size();
-  sj["clusters"] = clusters.size();
+  sj["clusters"] = first.cluster_sizes.size();
+  if (second) {
+    sj["second_pass"] = {{"points", second->cloud->size()},
+                         {"cluster_sizes", other.cluster_sizes},
+                         {"found", other.found.size()},
+                         {"added", st.second_pass_added},
+                         {"taken", st.second_pass_taken},
+                         {"locate_seconds", other.stats.seconds}};
+  }
   sj["locate_seconds"] = st.seconds;
   sj["split_parts_polished"] = st.split_parts_polished;
   sj["turned_poses"] = st.turned_poses;
@@ -564,6 +629,9 @@ int runCloud(const Options& o) {
   return counts.fn == 0 && counts.fp == 0 ? 0 : 3;
 }
 
+/// The second pass's image-noise seed is the cell's plus this (another scan, other noise).
+constexpr uint64_t kSecondPassNoise = 1000003;
+
 /// Random cells (eval/scene_generator) scanned in-process (the demo sweep unless told) and the nodes' crop
 /// and outlier filter, clustered and located: detection P/R/F1 and errors over the seeds.
 int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::string& out_dir) {
@@ -573,6 +641,8 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   const ClusteringConfig ccfg = loadClusteringConfig(o.root + "/config/clustering.yaml");
   const ScannerSettings settings = loadScannerSettings(o.root + "/config/scanner.yaml");
   const Trajectory sweep = loadTrajectory(o.root + "/config/trajectories.yaml", o.trajectory);
+  const bool two_passes = !o.second_pass.empty();
+  const Trajectory sweep2 = two_passes ? loadTrajectory(o.root + "/config/trajectories.yaml", o.second_pass) : Trajectory();
   ModelMatcher matcher(lib, cfg);
   matcher.prepare({});
   DetectionCounts total;
@@ -580,9 +650,11 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   const bool own_calibration = !o.calibration.empty();
   json out = {{"calibration", own_calibration ? o.calibration : "the simulator's true calibration"},
               {"trajectory", o.trajectory},
+              {"second_pass", two_passes ? json(o.second_pass) : json(nullptr)},
               {"success", {{"max_t_mm", o.max_t_mm}, {"max_r_deg", o.max_r_deg}}},
               {"seeds", json::array()}};
   int unmeasured = 0, fits_both = 0;  // misses with no scan point on the part; whose points a false pose fits
+  size_t second_added = 0;            // detections the second pass added
   for (const uint64_t seed : seeds) {
     const GeneratedScene g = generateScene(base, models, seed, {}, out_dir);
     const ScannerRenderer renderer(std::make_shared<CellGeometry>(g.scene));
@@ -603,11 +675,28 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
     for (const auto& p : cloud.points) pts.push_back(p.cast<double>());
     std::vector<int> on_object;  // the object each scan point lies on (the truth: for scoring only)
     const SurfaceErrorStats se = SurfaceDistance(g.scene).stats(pts, &on_object, kOnSurface);
-    json sj = locateAndScore(g.scene, cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1, &light, &on_object);
+    // the second pass: another scan of the same cell (its own image noise), located on its own
+    ScanCloud cloud2;
+    LightSweep light2;
+    std::vector<int> on_object2;
+    if (two_passes) {
+      cloud2 = simulateScan(renderer, sweep2.poses, cal, settings.line, settings.triangulation, seed + kSecondPassNoise, nullptr,
+                            &robot);
+      if (settings.has_workspace) cloud2 = cropBox(cloud2, settings.workspace);
+      cloud2 = statisticalOutlierRemoval(cloud2, settings.outlier_k, settings.outlier_std);
+      light2 = LightSweep::fromFlangePoses(sweep2.poses, cal.T_flange_laser, settings.laser_fan_angle / 2);
+      std::vector<Eigen::Vector3d> pts2;
+      for (const auto& p : cloud2.points) pts2.push_back(p.cast<double>());
+      SurfaceDistance(g.scene).stats(pts2, &on_object2, kOnSurface);
+    }
+    const PassScan second{&cloud2, &light2, &on_object2};
+    json sj = locateAndScore(g.scene, cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1, &light, &on_object,
+                             two_passes ? &second : nullptr);
     sj["seed"] = seed;
     sj["scene"] = g.file;
     sj["surface_error_rms_mm"] = se.rms * 1e3;
     rms.push_back(se.rms * 1e3);
+    if (two_passes) second_added += sj["second_pass"]["added"].get<size_t>();
     out["seeds"].push_back(sj);
     total.tp += counts.tp;
     total.fp += counts.fp;
@@ -638,6 +727,7 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   // a false detection of their model fits as well (describeScanPoints)
   out["fn_no_scan_point"] = unmeasured;
   out["fn_points_fit_a_false_pose"] = fits_both;
+  if (two_passes) out["second_pass_added"] = second_added;
   // detections the matcher reported ambiguous (a turn fits about as well): right ones, false
   // ones, and false ones whose alternative pose is the part's
   out["ambiguous_found"] = total.ambiguous_tp;
@@ -687,6 +777,9 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
   std::printf("cells: %zu seeds, P %.3f R %.3f F1 %.3f, median %.3f mm %.3f deg, surface RMS median %.4f mm max %.4f mm\n",
               seeds.size(), total.precision(), total.recall(), total.f1(), median(terr), median(rerr), median(rms),
               out["surface_error_rms_mm_max"].get<double>());
+  if (two_passes)
+    std::printf("cells: the second pass (%s) added %zu detections where the first (%s) had none\n", o.second_pass.c_str(),
+                second_added, o.trajectory.c_str());
   for (const auto& f : failed) std::printf("cells: LIMIT EXCEEDED: %s\n", f.get<std::string>().c_str());
   return failed.empty() ? 0 : 4;
 }
@@ -794,6 +887,9 @@ int main(int argc, char** argv) {
   c_cells->add_option("--seeds", cell_seeds, "scene seeds");
   c_cells->add_option("--trajectory", cells.trajectory, "the scan's trajectory (config/trajectories.yaml)")
       ->capture_default_str();
+  c_cells->add_option("--second-pass", cells.second_pass,
+                      "scan each cell again along this trajectory (e.g. reverse_sweep: the sheet leaning the other way), "
+                      "locate on it alike and add the parts found where the first pass found none");
   c_cells->add_option("--dump-clusters", cells.dump_clusters, "write every scene's clusters (and its support points) as PLY into this folder");
   c_cells->add_option("--seeds-file", seeds_file, "a seeds file, e.g. config/heldout_seeds.yaml")->check(CLI::ExistingFile);
   c_cells->add_option("--out", cells_out, "where the generated scenes go")->capture_default_str();

@@ -824,6 +824,53 @@ TEST(ModelMatching, TwoDetectionsThatWouldShareSpaceKeepTheBetterExplained) {
   EXPECT_LT(e.rotation, 2 * M_PI / 180);
 }
 
+// A second pass (the sheet leaning the other way) lights what the first pass's sheet shaded: its
+// detections join the first pass's only where no part was found already.
+TEST(ModelMatching, ASecondPassAddsOnlyWhatTheFirstLeftFree) {
+  MatchingConfig shipped = loadMatchingConfig(std::string(CELLSIGHT_SOURCE_DIR) + "/config/matching.yaml");
+  shipped.viewpoint = kEye;
+  ASSERT_LT(shipped.max_interpenetration, 1.0) << "the interpenetration test is off as shipped";
+  const ModelMatcher m(library(), shipped);
+  auto det = [](const std::string& model, const Eigen::Isometry3d& pose) {
+    PartDetection d;
+    d.model = model;
+    d.pose = pose;
+    d.fitness = 0.9;
+    return d;
+  };
+  const Eigen::Isometry3d shaft = onTable(0.45, 0.0, 0.0);  // standing: 50 mm across, 62.5 mm tall
+  const std::vector<PartDetection> first{det("flanged_shaft", shaft)};
+  const std::vector<PartDetection> second{
+      det("flanged_shaft", shaft * Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ())),  // the same part, turned: taken
+      det("sphere25", onTable(0.455, 0.0, 0.0)),   // another model inside the shaft: taken
+      det("sphere25", onTable(0.45, 0.040, 0.0)),  // beside the shaft, 2.5 mm clear of it: added
+      det("holder", onTable(0.60, -0.08, 1.0)),    // a part the first pass did not find: added
+      det("holder", onTable(0.601, -0.081, 2.0))};  // the same again, in this pass: taken
+  MatchStats st;
+  const auto merged = m.mergePasses(first, second, &st);
+  ASSERT_EQ(merged.size(), 3u);
+  EXPECT_EQ(merged[0].pass, 0);
+  EXPECT_TRUE(merged[0].pose.isApprox(shaft));
+  EXPECT_EQ(merged[1].model, "sphere25");
+  EXPECT_EQ(merged[1].pass, 1);
+  EXPECT_NEAR(merged[1].pose.translation().y(), 0.040, 1e-12);
+  EXPECT_EQ(merged[2].model, "holder");
+  EXPECT_EQ(merged[2].pass, 1);
+  EXPECT_NEAR(merged[2].pose.translation().x(), 0.60, 1e-12);
+  EXPECT_EQ(st.second_pass_added, 2u);
+  EXPECT_EQ(st.second_pass_taken, 3u);
+  // with the space test off, only the same model near the same place is taken
+  MatchingConfig off = shipped;
+  off.max_interpenetration = 1;
+  MatchStats st_off;
+  EXPECT_EQ(ModelMatcher(library(), off).mergePasses(first, second, &st_off).size(), 4u);
+  EXPECT_EQ(st_off.second_pass_taken, 2u);
+  // nothing to merge, and a model the library lacks
+  EXPECT_EQ(m.mergePasses(first, {}).size(), 1u);
+  EXPECT_EQ(m.mergePasses({}, first).size(), 1u);
+  EXPECT_THROW(m.mergePasses(first, {det("no_such_part", shaft)}), std::out_of_range);
+}
+
 namespace {
 /// A housing's single view cut across x: `percent` of its points below the cut, the rest above.
 struct SplitView {

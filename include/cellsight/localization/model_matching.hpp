@@ -290,6 +290,8 @@ struct PartDetection {
   int iterations = 0;    ///< RANSAC hypotheses drawn
   std::string matcher;   ///< the coarse stage: "ppf", "ransac" or "fgr"
   bool refined = false;  ///< refine() moved it to its pose on a second scan
+  /// the scan it was found on: 0 the first (locate()), 1 a second pass that mergePasses() added
+  int pass = 0;
   double coarse_seconds = 0, refine_seconds = 0;  ///< CPU time of the stages for this pair
   /// A pose in MatchStats::rejected: the acceptance tests it failed, with its figure and the
   /// limit, as refusalReasons() words them (empty for a pose that was accepted).
@@ -324,6 +326,9 @@ struct MatchStats {
   size_t split_second_look = 0;
   /// detections dropped because a better explained one's model holds them (max_interpenetration)
   size_t interpenetrating = 0;
+  /// mergePasses(): second-pass detections added (their place free in the first pass), and those
+  /// left out because a detection already kept holds their place
+  size_t second_pass_added = 0, second_pass_taken = 0;
   std::vector<PartDetection> rejected;  ///< best pose per (cluster, model) that failed validation
   std::vector<std::string> warnings;
 };
@@ -413,6 +418,17 @@ class ModelMatcher {
   std::vector<PartDetection> refine(const ScanCloud& scan, const std::vector<PartDetection>& parts,
                                     MatchStats* stats = nullptr, const Eigen::Vector3f* viewpoint = nullptr,
                                     const Eigen::Vector4f* support_plane = nullptr) const;
+
+  /// Joins the detections of two scans of one cell (locate() on each, e.g. a second pass with the
+  /// sheet leaning the other way, which lights what the first pass's sheet shaded). Every
+  /// detection of `first` stands; one of `second` is added (`pass` = 1) when no detection kept so
+  /// far holds its place: none of its model whose centroid lies within a quarter of the two
+  /// diameters of its own (the same part, however turned), and none it would share space with
+  /// (max_interpenetration at interpenetration_depth, as locate() drops such pairs; off at 1).
+  /// Counts in `stats` (second_pass_added, second_pass_taken). Unknown model ids throw
+  /// std::out_of_range.
+  std::vector<PartDetection> mergePasses(const std::vector<PartDetection>& first, const std::vector<PartDetection>& second,
+                                         MatchStats* stats = nullptr) const;
 
   /// Builds the per-model data (clouds, descriptors, distance field) now rather than on the
   /// first locate(); unknown ids throw std::out_of_range.

@@ -1235,4 +1235,40 @@ std::vector<PartDetection> ModelMatcher::refine(const ScanCloud& scan, const std
   return out;
 }
 
+std::vector<PartDetection> ModelMatcher::mergePasses(const std::vector<PartDetection>& first,
+                                                     const std::vector<PartDetection>& second, MatchStats* stats) const {
+  MatchStats local;
+  MatchStats& st = stats ? *stats : local;
+  for (const auto* pass : {&first, &second})
+    for (const auto& d : *pass) library_->model(d.model);  // unknown id: throws before any work
+  std::vector<PartDetection> out = first;
+  std::vector<std::shared_ptr<const ModelIndex>> idx;
+  for (const auto& d : out) idx.push_back(index(d.model));
+  const float depth = static_cast<float>(config_.interpenetration_depth);
+  for (const auto& d : second) {
+    const std::shared_ptr<const ModelIndex> md = index(d.model);
+    const Eigen::Vector3d c = d.pose * md->centroid;
+    bool taken = false;
+    for (size_t k = 0; k < out.size() && !taken; ++k) {
+      const ModelIndex& mk = *idx[k];
+      const double reach = static_cast<double>(md->diameter) + static_cast<double>(mk.diameter);
+      const double apart = (c - out[k].pose * mk.centroid).norm();
+      if (apart > 0.5 * reach) continue;
+      taken = (out[k].model == d.model && apart < 0.25 * reach) ||
+              (config_.max_interpenetration < 1 &&
+               std::max(interpenetration(out[k], mk, d, *md, depth), interpenetration(d, *md, out[k], mk, depth)) >
+                   config_.max_interpenetration);
+    }
+    if (taken) {
+      ++st.second_pass_taken;
+      continue;
+    }
+    out.push_back(d);
+    out.back().pass = 1;
+    idx.push_back(md);
+    ++st.second_pass_added;
+  }
+  return out;
+}
+
 }  // namespace cellsight
