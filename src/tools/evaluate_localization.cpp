@@ -454,12 +454,14 @@ void describeScanPoints(const Scene& scene, const ModelLibrary& lib, const ScanC
   }
 }
 
-/// One finished scan of a cell (cropped and filtered as the nodes do), the sweep that lit it and,
-/// for scoring only, the object each of its points lies on (SurfaceDistance::stats).
-struct PassScan {
-  const ScanCloud* cloud = nullptr;
-  const LightSweep* light = nullptr;
-  const std::vector<int>* on_object = nullptr;
+/// One finished scan of a cell (cropped and filtered as the nodes do), the sweep that lit it as
+/// the scanner knows it and, for scoring only, the object each of its points lies on and the
+/// scan's surface error (SurfaceDistance::stats).
+struct CellScan {
+  ScanCloud cloud;
+  LightSweep light;
+  std::vector<int> on_object;
+  double surface_rms = 0;  ///< m
 };
 
 /// A scan clustered and located as the nodes do.
@@ -473,10 +475,10 @@ struct PassResult {
 /// `other_support`: table points another scan of the cell measured, added to this scan's for the
 /// free-space tests (the cell stands still between passes: where either scan saw the table, no
 /// part is).
-PassResult locatePass(const Scene& scene, const PassScan& scan, ModelMatcher& matcher, const ClusteringConfig& ccfg,
-                      const Options& o, const std::string& suffix,
+PassResult locatePass(const Scene& scene, const ScanCloud& cloud, const LightSweep* light, ModelMatcher& matcher,
+                      const ClusteringConfig& ccfg, const Options& o, const std::string& suffix,
                       const std::vector<Eigen::Vector3f>* other_support = nullptr) {
-  ClusteringResult cr = clusterScene(*scan.cloud, ccfg);
+  ClusteringResult cr = clusterScene(cloud, ccfg);
   PassResult r;
   r.support_points = cr.support_points;
   if (other_support) cr.support_points.insert(cr.support_points.end(), other_support->begin(), other_support->end());
@@ -493,12 +495,12 @@ PassResult locatePass(const Scene& scene, const PassScan& scan, ModelMatcher& ma
     for (const auto& p : cr.fragments) fragments.append(p, 0.f);
     if (fragments.size() > 0) saveCloud(stem + "_fragments.ply", fragments);
     // the sweep the illumination and unseen tests read
-    if (scan.light) saveSweep(stem + "_sweep.txt", *scan.light);
+    if (light) saveSweep(stem + "_sweep.txt", *light);
   }
   const Eigen::Vector3f eye = scene.scanner_camera.T_base_camera.translation().cast<float>();
   const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
                                 static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
-  r.found = matcher.locate(clusters, {}, &r.stats, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, scan.light,
+  r.found = matcher.locate(clusters, {}, &r.stats, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, light,
                            &cr.fragments);
   for (const auto& c : clusters) r.cluster_sizes.push_back(c.size());
   return r;
@@ -509,13 +511,13 @@ PassResult locatePass(const Scene& scene, const PassScan& scan, ModelMatcher& ma
 json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibrary& lib, ModelMatcher& matcher,
                     const ClusteringConfig& ccfg, const Options& o, DetectionCounts* counts, std::vector<double>* terr,
                     std::vector<double>* rerr, const LightSweep* light = nullptr, const std::vector<int>* on_object = nullptr,
-                    const PassScan* second = nullptr) {
-  PassResult first = locatePass(scene, {&cloud, light, on_object}, matcher, ccfg, o, "");
+                    const CellScan* second = nullptr) {
+  PassResult first = locatePass(scene, cloud, light, matcher, ccfg, o, "");
   MatchStats& st = first.stats;
   std::vector<PartDetection> found = first.found;
   PassResult other;
   if (second) {
-    other = locatePass(scene, *second, matcher, ccfg, o, "_pass2", &first.support_points);
+    other = locatePass(scene, second->cloud, &second->light, matcher, ccfg, o, "_pass2", &first.support_points);
     found = matcher.mergePasses(first.found, other.found, &st);
     for (auto r : other.stats.rejected) {
       r.pass = 1;
@@ -579,12 +581,12 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
                               {"refused_by", r.refused_by},
                               {"right", t_err <= o.max_t_mm * 1e-3 && r_err <= o.max_r_deg * kDeg}});
   }
-  if (on_object && second && second->on_object) {  // what either scan measured of each part
+  if (on_object && second) {  // what either scan measured of each part
     ScanCloud both = cloud;
     std::vector<int> on = *on_object;
     on.resize(cloud.size(), -1);
-    for (size_t i = 0; i < second->cloud->size(); ++i) both.append(second->cloud->points[i], 0.f);
-    on.insert(on.end(), second->on_object->begin(), second->on_object->end());
+    for (const auto& p : second->cloud.points) both.append(p, 0.f);
+    on.insert(on.end(), second->on_object.begin(), second->on_object.end());
     describeScanPoints(scene, lib, both, on, dets, &sj);
   } else if (on_object) {
     describeScanPoints(scene, lib, cloud, *on_object, dets, &sj);
@@ -593,7 +595,7 @@ json locateAndScore(const Scene& scene, const ScanCloud& cloud, const ModelLibra
   sj["points"] = cloud.size();
   sj["clusters"] = first.cluster_sizes.size();
   if (second) {
-    sj["second_pass"] = {{"points", second->cloud->size()},
+    sj["second_pass"] = {{"points", second->cloud.size()},
                          {"cluster_sizes", other.cluster_sizes},
                          {"found", other.found.size()},
                          {"added", st.second_pass_added},
@@ -632,6 +634,23 @@ int runCloud(const Options& o) {
 /// The second pass's image-noise seed is the cell's plus this (another scan, other noise).
 constexpr uint64_t kSecondPassNoise = 1000003;
 
+/// A generated cell scanned in-process along `sweep` with `cal` (frames rendered where the robot
+/// as built takes the flange; image noise from `noise_seed`), with the nodes' crop and outlier
+/// filter; the light sheet frame by frame as the scanner knows it (the poses the robot reported,
+/// the calibrated flange → laser transform); each point's object from the truth.
+CellScan scanCell(const Scene& scene, const ScannerRenderer& renderer, const Trajectory& sweep, const ScannerCalibration& cal,
+                  const ScannerSettings& settings, const RobotErrorModel& robot, uint64_t noise_seed) {
+  CellScan s;
+  s.cloud = simulateScan(renderer, sweep.poses, cal, settings.line, settings.triangulation, noise_seed, nullptr, &robot);
+  if (settings.has_workspace) s.cloud = cropBox(s.cloud, settings.workspace);
+  s.cloud = statisticalOutlierRemoval(s.cloud, settings.outlier_k, settings.outlier_std);
+  s.light = LightSweep::fromFlangePoses(sweep.poses, cal.T_flange_laser, settings.laser_fan_angle / 2);
+  std::vector<Eigen::Vector3d> pts;
+  for (const auto& p : s.cloud.points) pts.push_back(p.cast<double>());
+  s.surface_rms = SurfaceDistance(scene).stats(pts, &s.on_object, kOnSurface).rms;
+  return s;
+}
+
 /// Random cells (eval/scene_generator) scanned in-process (the demo sweep unless told) and the nodes' crop
 /// and outlier filter, clustered and located: detection P/R/F1 and errors over the seeds.
 int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::string& out_dir) {
@@ -663,39 +682,18 @@ int runCells(const Options& o, const std::vector<uint64_t>& seeds, const std::st
     const RobotErrorModel robot(g.scene.as_built.robot);
     const ScannerCalibration cal =
         own_calibration ? ScannerCalibration::fromFolder(o.calibration) : ScannerCalibration::fromScene(g.scene);
-    ScanCloud cloud = simulateScan(renderer, sweep.poses, cal, settings.line, settings.triangulation, seed, nullptr, &robot);
-    if (settings.has_workspace) cloud = cropBox(cloud, settings.workspace);
-    cloud = statisticalOutlierRemoval(cloud, settings.outlier_k, settings.outlier_std);
+    const CellScan scan = scanCell(g.scene, renderer, sweep, cal, settings, robot, seed);
+    // the second pass: another scan of the same cell (its own image noise), located on its own
+    CellScan second;
+    if (two_passes) second = scanCell(g.scene, renderer, sweep2, cal, settings, robot, seed + kSecondPassNoise);
     DetectionCounts counts;
     std::vector<double> t1, r1;
-    // the light sheet frame by frame, as the scanner knows it: the poses the robot reported and
-    // the calibrated flange → laser transform
-    const LightSweep light = LightSweep::fromFlangePoses(sweep.poses, cal.T_flange_laser, settings.laser_fan_angle / 2);
-    std::vector<Eigen::Vector3d> pts;
-    for (const auto& p : cloud.points) pts.push_back(p.cast<double>());
-    std::vector<int> on_object;  // the object each scan point lies on (the truth: for scoring only)
-    const SurfaceErrorStats se = SurfaceDistance(g.scene).stats(pts, &on_object, kOnSurface);
-    // the second pass: another scan of the same cell (its own image noise), located on its own
-    ScanCloud cloud2;
-    LightSweep light2;
-    std::vector<int> on_object2;
-    if (two_passes) {
-      cloud2 = simulateScan(renderer, sweep2.poses, cal, settings.line, settings.triangulation, seed + kSecondPassNoise, nullptr,
-                            &robot);
-      if (settings.has_workspace) cloud2 = cropBox(cloud2, settings.workspace);
-      cloud2 = statisticalOutlierRemoval(cloud2, settings.outlier_k, settings.outlier_std);
-      light2 = LightSweep::fromFlangePoses(sweep2.poses, cal.T_flange_laser, settings.laser_fan_angle / 2);
-      std::vector<Eigen::Vector3d> pts2;
-      for (const auto& p : cloud2.points) pts2.push_back(p.cast<double>());
-      SurfaceDistance(g.scene).stats(pts2, &on_object2, kOnSurface);
-    }
-    const PassScan second{&cloud2, &light2, &on_object2};
-    json sj = locateAndScore(g.scene, cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1, &light, &on_object,
+    json sj = locateAndScore(g.scene, scan.cloud, *lib, matcher, ccfg, o, &counts, &t1, &r1, &scan.light, &scan.on_object,
                              two_passes ? &second : nullptr);
     sj["seed"] = seed;
     sj["scene"] = g.file;
-    sj["surface_error_rms_mm"] = se.rms * 1e3;
-    rms.push_back(se.rms * 1e3);
+    sj["surface_error_rms_mm"] = scan.surface_rms * 1e3;
+    rms.push_back(scan.surface_rms * 1e3);
     if (two_passes) second_added += sj["second_pass"]["added"].get<size_t>();
     out["seeds"].push_back(sj);
     total.tp += counts.tp;

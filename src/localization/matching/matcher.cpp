@@ -723,6 +723,14 @@ double interpenetration(const PartDetection& a, const ModelMatcher::ModelIndex& 
   return n ? static_cast<double>(inside) / static_cast<double>(n) : 0.0;
 }
 
+/// The share of space two detections would hold together: the larger of the two interpenetration
+/// shares, 0 when their centroids lie farther apart than half the two diameters.
+double sharedSpace(const PartDetection& a, const ModelMatcher::ModelIndex& ma, const PartDetection& b,
+                   const ModelMatcher::ModelIndex& mb, float depth) {
+  if ((a.pose * ma.centroid - b.pose * mb.centroid).norm() > 0.5 * (ma.diameter + mb.diameter)) return 0;
+  return std::max(interpenetration(a, ma, b, mb, depth), interpenetration(b, mb, a, ma, depth));
+}
+
 /// Drops every detection that shares space with a better explained one (max_interpenetration).
 void dropInterpenetrating(std::vector<PartDetection>& kept, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
                           const std::vector<std::string>& models, const MatchingConfig& cfg, MatchStats& st) {
@@ -739,8 +747,7 @@ void dropInterpenetrating(std::vector<PartDetection>& kept, const std::vector<st
       if (drop[order[j]]) continue;
       const PartDetection& k = kept[order[j]];
       const ModelMatcher::ModelIndex& mk = indexOf(idx, models, k.model);
-      if ((d.pose * md.centroid - k.pose * mk.centroid).norm() > 0.5 * (md.diameter + mk.diameter)) continue;
-      const double share = std::max(interpenetration(k, mk, d, md, depth), interpenetration(d, md, k, mk, depth));
+      const double share = sharedSpace(k, mk, d, md, depth);
       if (share <= cfg.max_interpenetration) continue;
       drop[order[i]] = true;
       ++st.interpenetrating;
@@ -1251,13 +1258,9 @@ std::vector<PartDetection> ModelMatcher::mergePasses(const std::vector<PartDetec
     bool taken = false;
     for (size_t k = 0; k < out.size() && !taken; ++k) {
       const ModelIndex& mk = *idx[k];
-      const double reach = static_cast<double>(md->diameter) + static_cast<double>(mk.diameter);
-      const double apart = (c - out[k].pose * mk.centroid).norm();
-      if (apart > 0.5 * reach) continue;
-      taken = (out[k].model == d.model && apart < 0.25 * reach) ||
-              (config_.max_interpenetration < 1 &&
-               std::max(interpenetration(out[k], mk, d, *md, depth), interpenetration(d, *md, out[k], mk, depth)) >
-                   config_.max_interpenetration);
+      // the same part, however turned (the quarter of clearOfFound), or one that would share its space
+      taken = (out[k].model == d.model && (c - out[k].pose * mk.centroid).norm() < 0.25 * (md->diameter + mk.diameter)) ||
+              (config_.max_interpenetration < 1 && sharedSpace(out[k], mk, d, *md, depth) > config_.max_interpenetration);
     }
     if (taken) {
       ++st.second_pass_taken;
