@@ -1,5 +1,6 @@
-// Private to the two libtorch translation units (learned_descriptor.cpp, descriptor_training.cpp):
-// the network module and the per-cloud structure (sampling, groups, reference frames) it runs on.
+// Private to the libtorch translation units (learned_descriptor.cpp,
+// learned_descriptor_structure.cpp, descriptor_training.cpp): the network module and the
+// per-cloud structure (sampling, groups, reference frames) it runs on.
 #pragma once
 #include <torch/torch.h>
 

@@ -2,7 +2,7 @@
 // search → RANSAC / FGR → ICP → validation: a PointNet++ segmentation network (farthest-point
 // sampling, ball query, multi-scale grouping, feature propagation back to every point, a linear
 // head to K features, L2-normalised) run with libtorch on the CPU. libtorch stays inside
-// src/localization/learned_descriptor.cpp and descriptor_training.cpp: this header has no torch.
+// src/localization/learned_descriptor*.cpp and descriptor_training.cpp: this header has no torch.
 //
 // Rotation handling (DescriptorNetConfig::rotation):
 //  - "lrf": every group's coordinates (and, in the first layer, its normals) are expressed in a

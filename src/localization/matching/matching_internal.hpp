@@ -341,5 +341,77 @@ bool accepted(const PartDetection& d, const MatchingConfig& cfg);
 /// ... with this fitness floor instead of min_fitness.
 bool accepted(const PartDetection& d, const MatchingConfig& cfg, double min_fitness);
 
+// ---- pair_matching.cpp
+/// The unseen share and continuation of d under T, traced only for a pose that passes every
+/// other test (the fitness at half its floor) with a sweep; 0 otherwise.
+void traceSurfaceTests(const SceneData& s, const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& T,
+                       const MatchingConfig& cfg, const Eigen::Vector4f* support, PartDetection* d);
+/// One (cluster, model) pair from the coarse stage to its best screened and polished pose.
+PartDetection matchPair(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                        const Eigen::Vector4f* support, uint64_t seed);
+/// The found pose, or one turned about the support's normal that fits about as closely and
+/// scores higher (MatchingConfig::turned_poses); *turned: whether it was turned.
+PartDetection turnedPose(const SceneData& s, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+                         const Eigen::Vector4f* support, const PartDetection& found, bool* turned);
+/// `d` polished and centred from T0 on `points` (a scene of their own, with the whole-scan grid,
+/// support and sweep where given) into *r; false when the ICP diverged or left the support.
+bool polishOn(std::vector<Vec3> points, const ModelMatcher::ModelIndex& m, const MatchingConfig& cfg,
+              const Eigen::Vector4f* support_plane, const PartDetection& d, const Eigen::Isometry3f& T0,
+              const PointGrid* whole, const SupportSeen* seen, const LightSweep* light, PartDetection* r);
+
+// ---- found_parts.cpp
+/// A scan point's distance to a model (Ti: the inverse of its pose); infinite beyond `radius`.
+float modelDistance(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3f& Ti, const Vec3& p, float radius);
+
+/// Found parts at their poses, for handing scan points to them: a point belongs to the part
+/// whose model lies nearest it, within `radius`.
+struct FoundParts {
+  std::vector<const ModelMatcher::ModelIndex*> model;  // per part
+  std::vector<Eigen::Isometry3f> Tinv;
+  std::vector<Vec3> centre;
+  std::vector<float> reach;  // no point of part i lies farther from its centre (its centroid lies inside)
+  float radius = 0;
+  FoundParts(const std::vector<PartDetection>& parts, std::vector<const ModelMatcher::ModelIndex*> models, float r);
+  /// p's distance to part i's model at its pose (infinite beyond the radius)
+  float distance(size_t i, const Vec3& p) const;
+  /// the part p belongs to (-1: none within the radius)
+  int owner(const Vec3& p) const;
+  /// another part than i lies nearer p than d
+  bool nearerOther(size_t i, const Vec3& p, float d) const;
+};
+
+/// How far a model point moves from pose a to pose b, the part's symmetry taken out (m).
+double modelMove(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3d& a, const Eigen::Isometry3d& b);
+/// A detection whose pose moved from `before` to d->pose: its ambiguous turns moved with it.
+void carryTurns(const ModelMatcher::ModelIndex& m, const Eigen::Isometry3d& before, PartDetection* d);
+/// The index of model `id` among the call's `models` (idx[i] indexes models[i]; id is one of them).
+const ModelMatcher::ModelIndex& indexOf(const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                                        const std::vector<std::string>& models, const std::string& id);
+/// Found parts that clustering split polished again on every scan point near their model that
+/// lies nearer them than any other part (MatchingConfig::polish_split_parts).
+void polishSplitParts(std::vector<PartDetection>& parts, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                      const std::vector<std::string>& models, const std::vector<Vec3>& scan,
+                      const std::vector<int>& scan_cluster, const PointGrid& whole, const SupportSeen& seen,
+                      const LightSweep* light, const Eigen::Vector4f* support_plane, const MatchingConfig& cfg,
+                      MatchStats& st);
+/// The share of space two detections would hold together (the larger interpenetration share).
+double sharedSpace(const PartDetection& a, const ModelMatcher::ModelIndex& ma, const PartDetection& b,
+                   const ModelMatcher::ModelIndex& mb, float depth);
+/// Drops every detection that shares space with a better explained one (max_interpenetration).
+void dropInterpenetrating(std::vector<PartDetection>& kept, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                          const std::vector<std::string>& models, const MatchingConfig& cfg, MatchStats& st);
+/// Refused poses tested again with the found parts as occluders, accepted if they pass then
+/// (MatchingConfig::unseen_second_look).
+void unseenSecondLook(std::vector<PartDetection>& kept, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                      const std::vector<std::string>& models, const std::vector<ScanCloud>& clusters, const PointGrid& whole,
+                      const SupportSeen& seen, const LightSweep* light, const MatchingConfig& cfg, MatchStats& st);
+/// Refused pieces of split parts polished on the scan points near their model that no found part
+/// lies nearer, accepted if they pass then (MatchingConfig::split_second_look).
+void splitSecondLook(std::vector<PartDetection>& kept, const std::vector<std::shared_ptr<const ModelMatcher::ModelIndex>>& idx,
+                     const std::vector<std::string>& models, const std::vector<ScanCloud>& clusters,
+                     const std::vector<Vec3>& scan, const std::vector<int>& scan_cluster, const PointGrid& whole,
+                     const SupportSeen& seen, const LightSweep* light, const Eigen::Vector4f* support_plane,
+                     const MatchingConfig& cfg, MatchStats& st);
+
 }  // namespace matching_detail
 }  // namespace cellsight
