@@ -23,7 +23,7 @@ struct Data {
       const cellsight::Scene scene = cellsight::loadScene(root + "/config/scenes/demo.yaml");
       auto geometry = std::make_shared<cellsight::CellGeometry>(scene);
       cellsight::ScannerRenderer renderer(geometry);
-      x.cal = cellsight::ScannerCalibration::fromScene(scene);
+      x.cal = cellsight::scannerCalibrationOf(scene);
       const auto sweep = cellsight::loadTrajectories(root + "/config/trajectories.yaml").at("demo_sweep");
       for (size_t i = 0; i < sweep.poses.size(); i += 15) {  // 10 frames across the sweep
         x.frames.push_back(renderer.render(sweep.poses[i], i));

@@ -1,15 +1,18 @@
 #!/usr/bin/env bash
 # Replays a raw bag through the scanner's processing nodes (replay.launch) and writes the
-# finished cloud. Usage: scripts/replay.sh <build folder> <raw.bag> <out.ply>
+# finished cloud; with a fourth argument, waits for model_matching's detections of it and
+# writes them there. Usage: scripts/replay.sh <build folder> <raw.bag> <out.ply> [detections.json]
 set -euo pipefail
 BUILD=$1
 BAG=$(realpath "$2")
 OUTPUT=$(realpath -m "$3")
+DETECTIONS=${4:+$(realpath -m "$4")}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 source "$ROOT/scripts/ros-env.sh" "$BUILD"
 LOG="$OUTPUT.launch.log"
-rm -f "$OUTPUT"
-roslaunch -p "${ROS_MASTER_URI##*:}" cellsight replay.launch bag:="$BAG" output_file:="$OUTPUT" >"$LOG" 2>&1 &
+rm -f "$OUTPUT" ${DETECTIONS:+"$DETECTIONS"}
+roslaunch -p "${ROS_MASTER_URI##*:}" cellsight replay.launch bag:="$BAG" output_file:="$OUTPUT" \
+  detections_file:="${DETECTIONS:-}" >"$LOG" 2>&1 &
 LAUNCH_PID=$!
 # on exit roslaunch is stopped (it may be gone already: how it ends is not the result) and the
 # script leaves with its own status; the result is the finisher's clean exit within 300 s and the
@@ -41,3 +44,13 @@ done
 [ "$finished" = 1 ] || { echo "replay: the replay did not finish within 300 s, see $LOG" >&2; exit 1; }
 [ -f "$OUTPUT" ] || { echo "replay: no cloud written, see $LOG" >&2; exit 1; }
 grep "replay_finisher: scan of" "$LOG" | sed 's/.*replay_finisher: /replay: /'
+if [ -n "$DETECTIONS" ]; then
+  # the finished scan goes on through clustering and model_matching
+  for _ in $(seq 480); do
+    [ -f "$DETECTIONS" ] && break
+    kill -0 $LAUNCH_PID 2>/dev/null || break
+    sleep 0.25
+  done
+  [ -f "$DETECTIONS" ] || { echo "replay: model_matching wrote no detections within 120 s, see $LOG" >&2; exit 1; }
+  grep "model_matching: .* parts located" "$LOG" | tail -1 | sed 's/.*model_matching: /replay: /'
+fi

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Live scan (simulated cell, quick_sweep) recorded to a bag, then the bag replayed through the
-# processing nodes: the replayed cloud must hold the same points within 1e-6 m.
+# processing nodes: the replayed cloud must hold the same points within 1e-6 m. And the same bag
+# located in one process (cellsight_locate_bag, the nodes' functions without ROS transport) must
+# give the replayed nodes' detections: the same parts, names and models, poses within 1e-9 m.
 # Usage: replay_equivalence.sh <build folder> <work folder>
 set -uo pipefail
 BUILD=$1
@@ -22,10 +24,24 @@ kill -INT $LAUNCH_PID 2>/dev/null
 wait $LAUNCH_PID 2>/dev/null
 [ -f "$WORK/live/scan.ply" ] || { echo "FAIL: the live scan produced no cloud (see $WORK/live_launch.log)"; exit 1; }
 export ROS_MASTER_URI="http://127.0.0.1:$(free_port)"
-bash "$ROOT/scripts/replay.sh" "$BUILD" "$WORK/live/raw.bag" "$WORK/replay.ply" || { echo "FAIL: replay failed"; exit 1; }
+bash "$ROOT/scripts/replay.sh" "$BUILD" "$WORK/live/raw.bag" "$WORK/replay.ply" "$WORK/replay_detections.json" ||
+  { echo "FAIL: replay failed"; exit 1; }
+passed=0
+failed=0
 if "$BUILD/devel/lib/cellsight/cellsight_scanner_accuracy" compare --a "$WORK/live/scan.ply" --b "$WORK/replay.ply" --tolerance-m 1e-6; then
-  echo "1 passed, 0 failed"
-  exit 0
+  passed=$((passed + 1))
+else
+  echo "FAIL: the replayed cloud differs from the live one"
+  failed=$((failed + 1))
 fi
-echo "FAIL: the replayed cloud differs from the live one"
-exit 1
+"$BUILD/devel/lib/cellsight/cellsight_locate_bag" --bag "$WORK/live/raw.bag" --root "$ROOT" --json "$WORK/inprocess_detections.json" \
+  --cloud "$WORK/inprocess.ply" >"$WORK/inprocess.log" 2>&1
+echo "in-process: $(head -1 "$WORK/inprocess.log")"
+if /usr/bin/python3 "$ROOT/test/same_detections.py" "$WORK/replay_detections.json" "$WORK/inprocess_detections.json" 1e-9; then
+  passed=$((passed + 1))
+else
+  echo "FAIL: the nodes and the in-process pipeline located the same frames differently"
+  failed=$((failed + 1))
+fi
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]

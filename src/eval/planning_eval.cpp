@@ -8,7 +8,10 @@
 #include "cellsight/eval/sim_scan.hpp"
 #include "cellsight/localization/clustering.hpp"
 #include "cellsight/localization/model_library.hpp"
+#include "cellsight/localization/instance_names.hpp"
 #include "cellsight/localization/model_matching.hpp"
+#include "cellsight/localization/scan_localization.hpp"
+#include "cellsight/scanner/scan_pipeline.hpp"
 #include "cellsight/scanner/scanner_config.hpp"
 #include "cellsight/sim/renderer.hpp"
 #include "cellsight/sim/scene.hpp"
@@ -87,7 +90,7 @@ PlanningEvaluation::PlanningEvaluation(const PlanningEvalConfig& config) : impl_
   m.sweep = loadTrajectory(root + "/config/trajectories.yaml", config.trajectory);
   if (!config.refine_trajectory.empty())
     m.refine_sweep = loadTrajectory(root + "/config/trajectories.yaml", config.refine_trajectory);
-  m.cal = config.calibration.empty() ? ScannerCalibration::fromScene(m.scene) : ScannerCalibration::fromFolder(config.calibration);
+  m.cal = config.calibration.empty() ? scannerCalibrationOf(m.scene) : ScannerCalibration::fromFolder(config.calibration);
   m.renderer = std::make_unique<ScannerRenderer>(std::make_shared<CellGeometry>(m.scene));
   m.robot = std::make_unique<RobotErrorModel>(m.scene.as_built.robot);
   m.executor = std::make_unique<RobotErrorModel>(config.exact_robot ? RobotErrorConfig{} : m.scene.as_built.robot);
@@ -109,50 +112,46 @@ CycleReport PlanningEvaluation::run(uint64_t seed) {
   rep.seed = seed;
   // scan as the cell does: the robot as built moves, the scanner triangulates with `cal`
   double t0 = now();
+  const Eigen::Vector3f eye = m.cal.T_base_camera.translation().cast<float>();
   auto scan = [&](const Trajectory& t, uint64_t noise_seed) {
-    ScanCloud c = simulateScan(*m.renderer, t.poses, m.cal, m.settings.line, m.settings.triangulation, noise_seed,
-                               nullptr, m.robot.get());
-    if (m.settings.has_workspace) c = cropBox(c, m.settings.workspace);
-    return statisticalOutlierRemoval(c, m.settings.outlier_k, m.settings.outlier_std);
+    return finishScan(simulateScan(*m.renderer, t.poses, m.cal, m.settings.line, m.settings.triangulation, noise_seed,
+                                   nullptr, m.robot.get()),
+                      m.settings, eye);
+  };
+  // the sheet frame by frame as the scanner knows it (reported flange poses, calibrated laser)
+  auto light = [&](const Trajectory& t) {
+    return LightSweep::fromFlangePoses(t.poses, m.cal.T_flange_laser, m.settings.laser_fan_angle / 2);
   };
   ScanCloud cloud = scan(m.sweep, seed);
   rep.scan_seconds = now() - t0;
   if (!m.config.dump_scans.empty()) saveCloud(m.config.dump_scans + "/scan_" + std::to_string(seed) + ".ply", cloud);
   rep.scan_points = cloud.size();
   t0 = now();
-  const ClusteringResult cr = clusterScene(cloud, m.clustering);
-  std::vector<ScanCloud> clusters;
-  for (const auto& c : cr.clusters) clusters.push_back(c.cloud);
-  const Eigen::Vector3f eye = m.cal.T_base_camera.translation().cast<float>();
-  const Eigen::Vector4f support(static_cast<float>(cr.support.n.x()), static_cast<float>(cr.support.n.y()),
-                                static_cast<float>(cr.support.n.z()), static_cast<float>(cr.support.d));
-  // the sheet frame by frame as the scanner knows it (reported flange poses, calibrated laser)
-  const LightSweep light = LightSweep::fromFlangePoses(m.sweep.poses, m.cal.T_flange_laser, m.settings.laser_fan_angle / 2);
-  auto found = m.matcher->locate(clusters, {}, nullptr, &eye, cr.plane_found ? &support : nullptr, &cr.support_points, &light,
-                                 &cr.fragments);
-  rep.locate_seconds = now() - t0;
+  std::vector<ScanPass> passes{scanPass(PassRole::kDetect, clusterScene(cloud, m.clustering), eye, light(m.sweep))};
+  rep.locate_seconds = now() - t0;  // clustering; the matcher's time is added below
   if (!m.refine_sweep.poses.empty()) {
     // the second pass: its own image noise (another seed space), its own robot moves
     t0 = now();
     const ScanCloud second = scan(m.refine_sweep, seed + 1000003);
     rep.refine_scan_seconds = now() - t0;
     t0 = now();
-    // both passes' points above the support (their clusters): each pass pins what the other
-    // leaves loose (the first runs along the edges the second crosses)
-    ScanCloud above;
-    for (const auto& c : clusterScene(second, m.clustering).clusters)
-      above.points.insert(above.points.end(), c.cloud.points.begin(), c.cloud.points.end());
-    for (const auto& c : clusters) above.points.insert(above.points.end(), c.points.begin(), c.points.end());
-    MatchStats st;
-    found = m.matcher->refine(above, found, &st, &eye, cr.plane_found ? &support : nullptr);
+    passes.push_back(scanPass(PassRole::kRefine, clusterScene(second, m.clustering), eye, light(m.refine_sweep)));
     rep.refine_seconds = now() - t0;
-    for (const auto& d : found) rep.refined += d.refined ? 1 : 0;
-    rep.refine_warnings = st.warnings;
   }
-  rep.located = found.size();
+  const LocatedScan located = locateScan(*m.matcher, passes);
+  const std::vector<PartDetection>& found = located.parts;
+  rep.locate_seconds += located.passes.front().stats.seconds;
+  if (passes.size() > 1) {
+    rep.refine_seconds += located.passes.back().stats.seconds;
+    for (const auto& d : found) rep.refined += d.refined ? 1 : 0;
+    rep.refine_warnings = located.passes.back().stats.warnings;
+  }
+  // named as the model_matching node names them (the first scan: no earlier instances)
+  std::vector<NamedInstance> current;
+  for (const auto& d : found) current.push_back({d.model, "", d.pose.translation()});
+  const std::vector<std::string> names = assignInstanceNames({}, current, 0.05, "");
   std::vector<LocatedPart> parts;
-  std::map<std::string, int> count;
-  for (const auto& d : found) parts.push_back({d.model + "_" + std::to_string(count[d.model]++), d.model, d.pose, d.ambiguous_poses});
+  for (size_t i = 0; i < found.size(); ++i) parts.push_back({names[i], found[i].model, found[i].pose, found[i].ambiguous_poses});
   if (m.config.true_poses) {
     parts.clear();
     for (const SceneObject& o : m.scene.objects) parts.push_back({o.name, o.model, o.T_base_object, {}});

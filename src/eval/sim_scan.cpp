@@ -1,6 +1,5 @@
 #include "cellsight/eval/sim_scan.hpp"
 
-#include "cellsight/common/calibration.hpp"
 #include "cellsight/common/errors.hpp"
 
 #include <chrono>
@@ -8,73 +7,13 @@
 
 namespace cellsight {
 
-ScannerCalibration ScannerCalibration::fromScene(const Scene& s) {
+ScannerCalibration scannerCalibrationOf(const Scene& s) {
   ScannerCalibration c;
   c.intrinsics = s.scanner_camera.intrinsics;
   c.T_base_camera = s.scanner_camera.T_base_camera;
   c.T_flange_laser = s.laser.T_flange_laser;
   c.undistortion = std::make_shared<UndistortionMap>(c.intrinsics);
   return c;
-}
-
-ScannerCalibration ScannerCalibration::fromFolder(const std::string& dir, const std::string& camera_frame,
-                                                  const std::string& laser_frame, const std::string& camera_name) {
-  const CalibrationSet set = loadCalibrationFolder(dir);
-  ScannerCalibration c;
-  bool cam = false, pose = false, laser = false;
-  for (const auto& [file, t] : set.transforms) {
-    if (t.child_frame == camera_frame) {
-      c.T_base_camera = t.T_parent_child;
-      pose = true;
-    } else if (t.child_frame == laser_frame) {
-      c.T_flange_laser = t.T_parent_child;
-      laser = true;
-    }
-  }
-  for (const std::string& f : set.camera_files) {
-    const CameraIntrinsics k = loadCameraInfoYaml(f);
-    if (k.camera_name == camera_name || set.camera_files.size() == 1) {
-      c.intrinsics = k;
-      cam = true;
-    }
-  }
-  std::string missing;
-  if (!cam) missing += " camera intrinsics (camera_name " + camera_name + ")";
-  if (!pose) missing += " camera pose (child frame " + camera_frame + ")";
-  if (!laser) missing += " light sheet (child frame " + laser_frame + ")";
-  if (!missing.empty()) throw ConfigError(dir + ": the scanner calibration lacks" + missing);
-  c.undistortion = std::make_shared<UndistortionMap>(c.intrinsics);
-  return c;
-}
-
-bool lineAlongRows(const Plane& plane_camera) {
-  return std::abs(plane_camera.n.y()) >= std::abs(plane_camera.n.x());
-}
-
-void addProfile(const cv::Mat& image, const Eigen::Isometry3d& T_base_flange,
-                const ScannerCalibration& cal, const LineExtractionConfig& line,
-                const TriangulationConfig& tri, ScanCloud& cloud, LineExtractionStats* stats,
-                bool auto_direction) {
-  LineExtractionStats st;
-  LineExtractionConfig lc = line;
-  const Plane plane = laserPlane(cal.T_base_camera.inverse() * T_base_flange * cal.T_flange_laser);
-  if (auto_direction) lc.line_along_rows = lineAlongRows(plane);
-  const auto pts = extractLine(image, lc, &st);
-  const auto profile = cal.undistortion ? triangulate(pts, *cal.undistortion, plane, tri)
-                                        : triangulate(pts, cal.intrinsics, plane, tri);
-  for (const auto& pp : profile) {
-    cloud.append((cal.T_base_camera * pp.p).cast<float>(), pp.intensity);
-  }
-  if (stats) {
-    stats->scanned += st.scanned;
-    stats->found += st.found;
-    stats->no_line += st.no_line;
-    stats->ambiguous += st.ambiguous;
-    stats->too_wide += st.too_wide;
-    stats->edge += st.edge;
-    stats->saturated += st.saturated;
-    stats->background = st.background;
-  }
 }
 
 ScanCloud simulateScan(const ScannerRenderer& renderer,

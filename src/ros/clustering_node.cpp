@@ -9,6 +9,7 @@
 #include "cellsight_ros/node.hpp"
 #include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
+#include "cellsight_ros/scan_messages.hpp"
 
 namespace {
 
@@ -37,34 +38,13 @@ class Clustering {
       size_t dropped = 0;
       const cellsight::ScanCloud cloud = cellsight_ros::fromCloudMsg(*msg, &dropped);
       const cellsight::ClusteringResult r = cellsight::clusterScene(cloud, config_);
-      cellsight::ClusterArray out;
-      out.header = msg->header;
-      out.support_found = r.plane_found;
-      if (r.plane_found) out.support_plane = {r.support.n.x(), r.support.n.y(), r.support.n.z(), r.support.d};
-      cellsight::ScanCloud seen;
-      for (const auto& p : r.support_points) seen.append(p, 0.f);
-      out.support_points = cellsight_ros::toCloudMsg(seen, msg->header.stamp);
-      out.support_points.header.frame_id = msg->header.frame_id;
-      cellsight::ScanCloud fragments;
-      for (const auto& p : r.fragments) fragments.append(p, 0.f);
-      out.fragments = cellsight_ros::toCloudMsg(fragments, msg->header.stamp);
-      out.fragments.header.frame_id = msg->header.frame_id;
-      out.input_points = static_cast<uint32_t>(r.input_points);
-      out.points_above_support = static_cast<uint32_t>(r.after_plane);
-      out.warnings = r.warnings;
+      const cellsight::ClusterArray out = cellsight_ros::toClusterArrayMsg(r, msg->header);
       visualization_msgs::MarkerArray markers;
       visualization_msgs::Marker clear;
       clear.action = visualization_msgs::Marker::DELETEALL;
       markers.markers.push_back(clear);
       int id = 0;
       for (const auto& c : r.clusters) {
-        cellsight::Cluster cm;
-        cm.cloud = cellsight_ros::toCloudMsg(c.cloud, msg->header.stamp);
-        cm.cloud.header.frame_id = msg->header.frame_id;
-        cm.centroid = point(c.centroid);
-        cm.box_min = point(c.box.min());
-        cm.box_max = point(c.box.max());
-        out.clusters.push_back(std::move(cm));
         visualization_msgs::Marker m;
         m.header = msg->header;
         m.ns = "clusters";

@@ -24,7 +24,6 @@
 #include <mutex>
 #include <cstdlib>
 #include <thread>
-#include <nlohmann/json.hpp>
 
 #include "cellsight/ClusterArray.h"
 #include "cellsight/DetectionArray.h"
@@ -34,10 +33,12 @@
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/localization/instance_names.hpp"
 #include "cellsight/localization/model_matching.hpp"
+#include "cellsight/localization/scan_localization.hpp"
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
 #include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
+#include "cellsight_ros/scan_messages.hpp"
 
 namespace {
 
@@ -204,42 +205,17 @@ class ModelMatching {
              "); is the calibration published?";
       return false;
     }
-    std::vector<cellsight::ScanCloud> clusters;
-    for (const auto& c : msg.clusters) {
-      try {
-        clusters.push_back(cellsight_ros::fromCloudMsg(c.cloud));
-      } catch (const std::exception& e) {
-        out->warnings.push_back(std::string("a cluster cloud was unreadable: ") + e.what());
-        clusters.emplace_back();
-      }
+    cellsight::ScanPass pass = cellsight_ros::toScanPass(msg, T_frame_camera.translation().cast<float>(), &out->warnings);
+    if (matcher_->config().check_illumination) {
+      std::unique_ptr<cellsight::LightSweep> light = sweepFor(msg, &out->warnings);
+      if (light) pass.evidence.light = std::move(*light);
     }
-    const Eigen::Vector3f eye = T_frame_camera.translation().cast<float>();
-    cellsight::MatchStats stats;
-    const Eigen::Vector4f support(static_cast<float>(msg.support_plane[0]), static_cast<float>(msg.support_plane[1]),
-                                  static_cast<float>(msg.support_plane[2]), static_cast<float>(msg.support_plane[3]));
-    const bool use_support = msg.support_found && support.allFinite() && std::abs(support.head<3>().norm() - 1.f) < 1e-3f;
-    std::vector<Eigen::Vector3f> seen;
-    if (use_support && msg.support_points.width * msg.support_points.height > 0) {
-      try {
-        seen = cellsight_ros::fromCloudMsg(msg.support_points).points;
-      } catch (const std::exception& e) {
-        out->warnings.push_back(std::string("support_points unreadable, no free-space test: ") + e.what());
-      }
-    }
-    std::vector<Eigen::Vector3f> fragments;
-    if (msg.fragments.width * msg.fragments.height > 0) {
-      try {
-        fragments = cellsight_ros::fromCloudMsg(msg.fragments).points;
-      } catch (const std::exception& e) {
-        out->warnings.push_back(std::string("fragments unreadable, the fitness counts the clusters only: ") + e.what());
-      }
-    }
-    const std::unique_ptr<cellsight::LightSweep> light =
-        matcher_->config().check_illumination ? sweepFor(msg, &out->warnings) : nullptr;
-    const auto dets = matcher_->locate(clusters, models, &stats, &eye, use_support ? &support : nullptr,
-                                       seen.empty() ? nullptr : &seen, light.get(), &fragments);
+    const size_t n_clusters = pass.clusters.size();
+    const cellsight::LocatedScan located = cellsight::locateScan(*matcher_, {std::move(pass)}, models);
+    const cellsight::MatchStats& stats = located.stats;
+    const std::vector<cellsight::PartDetection>& dets = located.parts;
     out->header = msg.header;
-    out->clusters = static_cast<uint32_t>(clusters.size());
+    out->clusters = static_cast<uint32_t>(n_clusters);
     out->locate_seconds = stats.seconds;
     diag_.processed(stats.seconds);
     diag_.set("parts found in the last scan", std::to_string(dets.size()));
@@ -310,13 +286,6 @@ class ModelMatching {
     clear.action = visualization_msgs::Marker::DELETEALL;
     markers.markers.push_back(clear);
     int id = 0;
-    nlohmann::json j;
-    j["frame_id"] = out.header.frame_id;
-    j["stamp"] = out.header.stamp.toSec();
-    j["clusters"] = out.clusters;
-    j["locate_seconds"] = out.locate_seconds;
-    j["warnings"] = out.warnings;
-    j["detections"] = nlohmann::json::array();
     for (const auto& d : out.detections) {
       geometry_msgs::TransformStamped t;
       t.header = out.header;
@@ -340,21 +309,6 @@ class ModelMatching {
       m.color.b = 1.0f;
       m.color.a = 0.8f;
       markers.markers.push_back(m);
-      const auto& q = d.pose.orientation;
-      j["detections"].push_back({{"model", d.model},
-                                 {"name", d.name},
-                                 {"xyz", {d.pose.position.x, d.pose.position.y, d.pose.position.z}},
-                                 {"quat", {q.x, q.y, q.z, q.w}},
-                                 {"fitness", d.fitness},
-                                 {"coverage", d.coverage},
-                                 {"rmse", d.rmse},
-                                 {"matcher", d.matcher},
-                                 {"cluster", d.cluster},
-                                 {"ambiguous_poses", nlohmann::json::array()},
-                                 {"alternative_score_share", d.alternative_score_share}});
-      for (const auto& a : d.ambiguous_poses)
-        j["detections"].back()["ambiguous_poses"].push_back(
-            {{"xyz", {a.position.x, a.position.y, a.position.z}}, {"quat", {a.orientation.x, a.orientation.y, a.orientation.z, a.orientation.w}}});
       ROS_INFO("model_matching: %s = %s at (%.4f, %.4f, %.4f), fitness %.2f, coverage %.2f, rmse %.3f mm", d.name.c_str(),
                d.model.c_str(), d.pose.position.x, d.pose.position.y, d.pose.position.z, d.fitness, d.coverage,
                d.rmse * 1e3);
@@ -378,7 +332,7 @@ class ModelMatching {
              out.locate_seconds);
     if (!output_file_.empty()) {
       try {
-        cellsight::writeFileAtomic(output_file_, j.dump(2) + "\n");
+        cellsight::writeFileAtomic(output_file_, cellsight_ros::detectionsToJson(out).dump(2) + "\n");
       } catch (const std::exception& e) {
         ROS_ERROR("model_matching: cannot write %s: %s", output_file_.c_str(), e.what());
       }

@@ -8,7 +8,6 @@
 #include <message_filters/time_synchronizer.h>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
-#include <sensor_msgs/image_encodings.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
@@ -20,18 +19,15 @@
 
 #include "cellsight/FinishScan.h"
 #include "cellsight/common/scan_cloud.hpp"
-#include "cellsight/scanner/scanner_config.hpp"
-#include "cellsight/eval/sim_scan.hpp"
-#include "cellsight/scanner/triangulation.hpp"
+#include "cellsight/scanner/scan_pipeline.hpp"
 #include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/node.hpp"
 #include "cellsight/ScannerLineConfig.h"
 #include "cellsight_ros/diagnostics.hpp"
 #include "cellsight_ros/params.hpp"
+#include "cellsight_ros/scan_messages.hpp"
 
 namespace {
-
-namespace enc = sensor_msgs::image_encodings;
 
 class Triangulation {
  public:
@@ -41,15 +37,8 @@ class Triangulation {
     // One strictly validated settings file (config/scanner.yaml): a typo stops the node at start.
     const std::string settings_file = cellsight_ros::requireParam<std::string>(
         pnh, "settings_file", "scanner settings YAML, e.g. $(find cellsight)/config/scanner.yaml");
-    const cellsight::ScannerSettings settings = cellsight::loadScannerSettings(settings_file);
-    line_ = settings.line;
-    tri_ = settings.triangulation;
-    outlier_k_ = settings.outlier_k;
-    outlier_std_ = settings.outlier_std;
-    normal_k_ = settings.normal_k;
-    fan_half_angle_ = settings.laser_fan_angle / 2;
-    has_workspace_ = settings.has_workspace;
-    workspace_ = settings.workspace;
+    settings_ = cellsight::loadScannerSettings(settings_file);
+    line_ = settings_.line;
     cellsight_ros::param(pnh, "base_frame", base_frame_);
     cellsight_ros::param(pnh, "laser_frame", laser_frame_);
     info_sub_ = nh.subscribe("scanner_camera/camera_info", 5, &Triangulation::onInfo, this);
@@ -174,12 +163,7 @@ class Triangulation {
       diag_.dropped("unusable image");
       return;
     }
-    if (image->encoding == enc::MONO8) {
-      lc.channel = -1;
-    } else {
-      if (lc.channel < 0) lc.channel = 0;  // red laser by default
-      if (image->encoding == enc::BGR8) lc.channel = 2 - lc.channel;
-    }
+    lc = cellsight_ros::lineConfigFor(image->encoding, lc);
     geometry_msgs::TransformStamped T;
     try {
       T = buffer_.lookupTransform(base_frame_, image->header.frame_id, image->header.stamp, ros::Duration(0.2));
@@ -202,31 +186,40 @@ class Triangulation {
                         base_frame_.c_str(), laser_frame_.c_str(), image->header.stamp.toSec(), e.what());
     }
     const cellsight::Plane plane = cellsight_ros::fromPlaneMsg(*plane_msg);
-    // The sheet's trace on the image decides the search direction (rows or columns).
-    lc.line_along_rows = cellsight::lineAlongRows(plane);
     cellsight::LineExtractionStats st;
-    const auto pts = cellsight::extractLine(img, lc, &st);
-    const auto prof = cellsight::triangulate(pts, *map, plane, tri_);
     cellsight::ScanCloud profile;
     profile.frame_id = base_frame_;
-    for (const auto& p : prof) profile.append((T_base_camera * p.p).cast<float>(), p.intensity);
+    const size_t found = cellsight::addFrameProfile(img, plane, T_base_camera, *map, lc, settings_.triangulation, profile, &st);
     profile_pub_.publish(cellsight_ros::toCloudMsg(profile, image->header.stamp));
-    if (pts.empty()) {
+    if (found == 0) {
       ROS_DEBUG("triangulation: no line in frame %.6f (%d columns without a line, %d ambiguous)",
                 image->header.stamp.toSec(), st.no_line, st.ambiguous);
     }
     diag_.processed((ros::WallTime::now() - t0).toSec());
     std::lock_guard<std::mutex> lock(mutex_);
-    camera_center_ = T_base_camera.translation().cast<float>();
-    if (image->header.stamp > last_stamp_) last_stamp_ = image->header.stamp;
-    for (size_t i = 0; i < profile.size(); ++i) scan_.append(profile.points[i], profile.intensity[i]);
+    // the newest frame's camera centre (the normals' viewpoint); profiles kept by stamp, so the
+    // scan's point order does not depend on which callback thread finished first
+    if (image->header.stamp >= last_stamp_) {
+      last_stamp_ = image->header.stamp;
+      camera_center_ = T_base_camera.translation().cast<float>();
+    }
+    profiles_.emplace_back(image->header.stamp, std::move(profile));
     if (lit) sweep_.emplace_back(image->header.stamp, T_base_laser);
+  }
+
+  /// The scan so far: every frame's profile in stamp order (mutex_ held).
+  cellsight::ScanCloud joinedProfiles() {
+    std::stable_sort(profiles_.begin(), profiles_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    cellsight::ScanCloud scan;
+    scan.frame_id = base_frame_;
+    for (const auto& [stamp, p] : profiles_)
+      for (size_t i = 0; i < p.size(); ++i) scan.append(p.points[i], p.intensity[i]);
+    return scan;
   }
 
   bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
-    scan_ = cellsight::ScanCloud();
-    scan_.frame_id = base_frame_;
+    profiles_.clear();
     frames_ = 0;
     last_stamp_ = ros::Time();
     held_.clear();
@@ -255,22 +248,18 @@ class Triangulation {
           return true;
         }
       }
-      cloud = scan_;
+      cloud = joinedProfiles();
       sweep = sweep_;
       viewpoint = camera_center_;
       stamp = last_stamp_;
       res.frames = frames_;
     }
     cloud.frame_id = base_frame_;
-    if (has_workspace_) cloud = cellsight::cropBox(cloud, workspace_);
-    if (outlier_k_ > 0) cloud = cellsight::statisticalOutlierRemoval(cloud, outlier_k_, outlier_std_);
+    cloud = cellsight::finishScan(cloud, settings_, viewpoint);
     if (cloud.size() == 0) {
       res.status = cellsight::FinishScan::Response::EMPTY;
       res.message = "the scan is empty: no laser line was found in any frame";
       return true;
-    }
-    if (normal_k_ > 0 && cloud.size() > static_cast<size_t>(normal_k_)) {
-      cellsight::estimateNormals(cloud, normal_k_, viewpoint);
     }
     // the scan is as old as its last frame: consumers look transforms up at that stamp
     res.cloud = cellsight_ros::toCloudMsg(cloud, stamp);
@@ -279,7 +268,7 @@ class Triangulation {
     // there when the clusters of this cloud reach the matcher
     std::sort(sweep.begin(), sweep.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     cellsight::LightSweep light;
-    light.setFanHalfAngle(fan_half_angle_);
+    light.setFanHalfAngle(settings_.laser_fan_angle / 2);
     for (const auto& f : sweep) light.addLaserFrame(f.second);
     sweep_pub_.publish(cellsight_ros::toLaserSweepMsg(light, base_frame_, stamp));
     cloud_pub_.publish(res.cloud);
@@ -300,18 +289,12 @@ class Triangulation {
   }
 
   cellsight_ros::NodeDiagnostics diag_;
-  cellsight::LineExtractionConfig line_;  // guarded by mutex_ once the node runs
-  cellsight::TriangulationConfig tri_;
+  cellsight::ScannerSettings settings_;    // config/scanner.yaml as loaded
+  cellsight::LineExtractionConfig line_;  // its line thresholds, changed by reconfigure; guarded by mutex_
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<cellsight::ScannerLineConfig>> reconfigure_;
   std::string base_frame_ = "base_link";
   std::string laser_frame_ = "laser";
-  int outlier_k_ = 20;
-  double outlier_std_ = 3.0;
-  int normal_k_ = 15;
-  double fan_half_angle_ = 0;  // rad (0: the sheet unbounded)
-  bool has_workspace_ = false;
-  Eigen::AlignedBox3f workspace_;
   tf2_ros::Buffer buffer_;
   tf2_ros::TransformListener listener_;
   image_transport::ImageTransport it_;
@@ -327,10 +310,10 @@ class Triangulation {
   using Frame = std::pair<sensor_msgs::ImageConstPtr, cellsight::LaserPlaneStampedConstPtr>;
   static constexpr size_t kMaxHeldFrames = 50;
   std::deque<Frame> held_;  // frames that came before the first camera_info
-  cellsight::ScanCloud scan_;
+  std::vector<std::pair<ros::Time, cellsight::ScanCloud>> profiles_;  // the scan's frames, base frame
   uint32_t frames_ = 0;
-  ros::Time last_stamp_;  // newest frame in scan_
-  std::vector<std::pair<ros::Time, Eigen::Isometry3d>> sweep_;  // T_base_laser of scan_'s frames
+  ros::Time last_stamp_;  // newest frame in profiles_
+  std::vector<std::pair<ros::Time, Eigen::Isometry3d>> sweep_;  // T_base_laser of profiles_' frames
   Eigen::Vector3f camera_center_ = Eigen::Vector3f::Zero();
 };
 

@@ -96,7 +96,7 @@ int runSim(const Options& o) {
   TriangulationConfig tri;
   auto geometry = std::make_shared<CellGeometry>(scene);
   ScannerRenderer renderer(geometry);
-  const ScannerCalibration cal = ScannerCalibration::fromScene(scene);
+  const ScannerCalibration cal = scannerCalibrationOf(scene);
   const Eigen::AlignedBox3f ws(scene.workspace.min().cast<float>() - Eigen::Vector3f::Constant(0.002f),
                                scene.workspace.max().cast<float>() + Eigen::Vector3f::Constant(0.002f));
   nlohmann::json out;
@@ -236,7 +236,7 @@ int runScan(const Options& o) {
     ScannerRenderer renderer(std::make_shared<CellGeometry>(s));
     // the sweeps use the given calibration (default: the truth) with the robot as built
     const ScannerCalibration cal =
-        o.calibration.empty() ? ScannerCalibration::fromScene(s) : ScannerCalibration::fromFolder(o.calibration);
+        o.calibration.empty() ? scannerCalibrationOf(s) : ScannerCalibration::fromFolder(o.calibration);
     const RobotErrorModel robot(s.as_built.robot);
     for (const auto& obj : s.objects) {
       if (obj.model != o.sphere_model) continue;
@@ -301,8 +301,7 @@ int runFrames(const Options& o) {
     addProfile(grey, T, cal, line, settings.triangulation, cloud, &stats);
     ++used;
   }
-  if (settings.has_workspace) cloud = cropBox(cloud, settings.workspace);
-  if (settings.outlier_k > 0) cloud = statisticalOutlierRemoval(cloud, settings.outlier_k, settings.outlier_std);
+  cloud = finishScan(cloud, settings, cal.T_base_camera.translation().cast<float>());  // as the node finishes a scan
   if (!o.ply.empty()) saveCloud(o.ply, cloud);
   nlohmann::json out = {{"frames", used}, {"calibration", o.calibration},
                         {"flange_poses", o.flange_truth.empty() ? "as the robot reported them" : "the simulator's true poses"}};
@@ -322,7 +321,7 @@ int runFrames(const Options& o) {
 int runCalibration(const Options& o) {
   const Scene scene = loadScene(o.scene);
   const ScannerCalibration cal = ScannerCalibration::fromFolder(o.calibration);
-  const ScannerCalibration truth = ScannerCalibration::fromScene(scene);
+  const ScannerCalibration truth = scannerCalibrationOf(scene);
   constexpr double kDeg = M_PI / 180;
   auto angle = [](const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
     return Eigen::AngleAxisd(a.transpose() * b).angle();

@@ -42,7 +42,7 @@ TEST(ScannerAcceptance, NoiseFreeScanLiesOnTheTrueSurfaces) {
   s.noise.enabled = false;
   ScannerRenderer r(std::make_shared<CellGeometry>(s));
   const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
-  ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(s), {}, {}, 1);
+  ScanCloud cloud = simulateScan(r, traj.poses, scannerCalibrationOf(s), {}, {}, 1);
   const Eigen::AlignedBox3f ws(s.workspace.min().cast<float>() - Eigen::Vector3f::Constant(0.002f),
                                s.workspace.max().cast<float>() + Eigen::Vector3f::Constant(0.002f));
   cloud = statisticalOutlierRemoval(cropBox(cloud, ws), 20, 3.0);
@@ -86,7 +86,7 @@ TEST(ScannerAcceptance, ScanPointsAreAttributedToThePartsTheyLieOn) {
   s.noise.enabled = false;
   ScannerRenderer r(std::make_shared<CellGeometry>(s));
   const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
-  const ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(s), {}, {}, 1);
+  const ScanCloud cloud = simulateScan(r, traj.poses, scannerCalibrationOf(s), {}, {}, 1);
   std::vector<Eigen::Vector3d> pts;
   for (const auto& p : cloud.points) pts.push_back(p.cast<double>());
   SurfaceDistance(s).stats(pts, &on, 0.001);
@@ -106,7 +106,7 @@ TEST(ScannerAcceptance, ReferenceSphereProbingAndMultiOrientationErrors) {
   for (const auto& o : s.objects)
     if (o.model == "sphere25") sphere = &o;
   ASSERT_NE(sphere, nullptr);
-  const SphereAcceptance acc = sphereAcceptance(r, *sphere, ScannerCalibration::fromScene(s), {}, {}, 5, 0.5e-3, true);
+  const SphereAcceptance acc = sphereAcceptance(r, *sphere, scannerCalibrationOf(s), {}, {}, 5, 0.5e-3, true);
   std::printf("MPE_P %.4f mm (worst of 5: %.4f), MPE_AL %.4f mm\n", acc.mpe_p * 1e3, acc.mpe_p_worst * 1e3,
               acc.mpe_al * 1e3);
   for (const auto& f : acc.fits) EXPECT_GT(f.points, 1000u);
@@ -126,7 +126,7 @@ const DemoScan& demoScan() {
     out.scene = loadScene(kRoot + "/config/scenes/demo.yaml");
     ScannerRenderer r(std::make_shared<CellGeometry>(out.scene));
     const auto traj = loadTrajectories(kRoot + "/config/trajectories.yaml").at("demo_sweep");
-    const ScanCloud cloud = simulateScan(r, traj.poses, ScannerCalibration::fromScene(out.scene), {}, {}, 3);
+    const ScanCloud cloud = simulateScan(r, traj.poses, scannerCalibrationOf(out.scene), {}, {}, 3);
     out.clusters = clusterScene(cloud, loadClusteringConfig(kRoot + "/config/clustering.yaml"));
     return out;
   }();

@@ -6,6 +6,7 @@
 
 #include "cellsight/scanner/accuracy.hpp"
 #include "cellsight/scanner/line_extraction.hpp"
+#include "cellsight/scanner/scan_pipeline.hpp"
 #include "cellsight/scanner/triangulation.hpp"
 #include "test_helpers.hpp"
 
@@ -301,4 +302,75 @@ TEST(Accuracy, SphereFitMpeAlAndFlatness) {
   std::vector<Eigen::Vector3d> plane;
   for (int i = 0; i < 100; ++i) plane.push_back({i * 1e-3, (i % 7) * 1e-3, (i % 2 ? 1 : -1) * 1e-5});
   EXPECT_NEAR(fitPlane(plane).flatness, 2e-5, 1e-6);
+}
+
+// The pipeline's per-frame profile (scan_pipeline): the line searched across the sheet's trace,
+// triangulated on the sheet, moved to the base frame; from the flange pose the same profile.
+TEST(ScanPipeline, FrameProfileIsTheLineOnTheSheetInTheBaseFrame) {
+  const CameraIntrinsics K{"c", 640, 480, 800, 800, 320, 240, {0, 0, 0, 0, 0}};
+  const UndistortionMap map(K);
+  Plane sheet;  // |n_y| > |n_x|: its trace runs along the rows
+  sheet.n = Eigen::Vector3d(0, 0.8, 0.6);
+  sheet.d = -0.3;
+  EXPECT_TRUE(lineAlongRows(sheet));
+  Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();
+  T_base_camera.translation() = Eigen::Vector3d(0.5, 0, 0.6);
+  T_base_camera.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const cv::Mat img = syntheticLine(640, 480, 200.3, 0.0, 1.5, 120, 10);
+  LineExtractionConfig line;
+  line.line_along_rows = false;  // overridden by the sheet's trace
+  ScanCloud cloud;
+  LineExtractionStats st;
+  const size_t n = addFrameProfile(img, sheet, T_base_camera, map, line, TriangulationConfig{}, cloud, &st);
+  ASSERT_GT(n, 600u);
+  EXPECT_EQ(cloud.size(), n);
+  EXPECT_GE(st.found, static_cast<int>(n));
+  for (const auto& p : cloud.points) {
+    const Eigen::Vector3d q = T_base_camera.inverse() * p.cast<double>();
+    EXPECT_NEAR(sheet.n.dot(q) + sheet.d, 0, 1e-6);
+    EXPECT_NEAR(K.project(q).y(), 200.3, 0.05);
+  }
+  // the flange pose and the calibration give the same sheet, so the same points
+  ScannerCalibration cal;
+  cal.intrinsics = K;
+  cal.T_base_camera = T_base_camera;
+  Eigen::Isometry3d T_camera_laser = Eigen::Isometry3d::Identity();  // laser y = the sheet's normal
+  const Eigen::Vector3d ny = sheet.n, nz = ny.unitOrthogonal();
+  T_camera_laser.linear() << ny.cross(nz), ny, nz;
+  T_camera_laser.translation() = -sheet.d * sheet.n;
+  const Eigen::Isometry3d T_base_flange = Eigen::Translation3d(0.1, 0.2, 0.3) * Eigen::Isometry3d::Identity();
+  cal.T_flange_laser = T_base_flange.inverse() * T_base_camera * T_camera_laser;
+  ScanCloud from_flange;
+  EXPECT_THROW(addProfile(img, T_base_flange, cal, line, TriangulationConfig{}, from_flange), std::invalid_argument);
+  cal.undistortion = std::make_shared<UndistortionMap>(K);
+  ASSERT_EQ(addProfile(img, T_base_flange, cal, line, TriangulationConfig{}, from_flange), n);
+  for (size_t i = 0; i < n; ++i) EXPECT_LT((from_flange.points[i] - cloud.points[i]).norm(), 1e-6f) << i;
+}
+
+// The scan's finish: the workspace crop, the outlier filter and normals towards the camera, each
+// off where the settings turn it off.
+TEST(ScanPipeline, FinishCropsFiltersAndOrientsNormals) {
+  ScanCloud raw;
+  raw.frame_id = "base_link";
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) raw.append(Eigen::Vector3f(0.4f + 0.001f * i, 0.001f * j, 0.01f), 1.f);
+  raw.append(Eigen::Vector3f(0.42f, 0.02f, 0.05f), 1.f);  // a stray point 40 mm above the surface
+  raw.append(Eigen::Vector3f(0.9f, 0.02f, 0.01f), 1.f);   // outside the workspace
+  ScannerSettings s;
+  s.has_workspace = true;
+  s.workspace = Eigen::AlignedBox3f(Eigen::Vector3f(0.3f, -0.1f, -0.01f), Eigen::Vector3f(0.7f, 0.1f, 0.1f));
+  const Eigen::Vector3f eye(0.5f, 0.f, 0.6f);
+  const ScanCloud done = finishScan(raw, s, eye);
+  EXPECT_EQ(done.size(), 1600u);
+  EXPECT_EQ(done.frame_id, "base_link");
+  ASSERT_EQ(done.normals.size(), done.size());
+  for (size_t i = 0; i < done.size(); ++i) EXPECT_GT(done.normals[i].z(), 0.99f) << i;
+  s.outlier_k = 0;
+  s.normal_k = 0;
+  const ScanCloud cropped = finishScan(raw, s, eye);
+  EXPECT_EQ(cropped.size(), 1601u);
+  EXPECT_TRUE(cropped.normals.empty());
+  s.has_workspace = false;
+  EXPECT_EQ(finishScan(raw, s, eye).size(), raw.size());
+  EXPECT_EQ(finishScan(ScanCloud{}, ScannerSettings{}, eye).size(), 0u);
 }

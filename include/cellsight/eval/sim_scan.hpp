@@ -1,6 +1,6 @@
-// A whole scan without ROS: render each pose with the simulated camera, extract the line,
-// triangulate with a given calibration, accumulate in the base frame. Used by the accuracy tool,
-// tests and benchmarks; the ROS nodes run the same extraction and triangulation per frame.
+// A whole scan without ROS: render each pose with the simulated camera and run the scanner's
+// per-frame profile (scanner/scan_pipeline.hpp, as the triangulation node does) with a given
+// calibration. Used by the accuracy tool, the evaluation, tests and benchmarks.
 #pragma once
 #include <Eigen/Geometry>
 #include <memory>
@@ -9,6 +9,7 @@
 
 #include "cellsight/scanner/accuracy.hpp"
 #include "cellsight/scanner/line_extraction.hpp"
+#include "cellsight/scanner/scan_pipeline.hpp"
 #include "cellsight/sim/renderer.hpp"
 #include "cellsight/sim/robot_model.hpp"
 #include "cellsight/common/scan_cloud.hpp"
@@ -16,37 +17,14 @@
 
 namespace cellsight {
 
-/// The calibration the scanner uses (may differ from the simulator's truth).
-struct ScannerCalibration {
-  CameraIntrinsics intrinsics;
-  Eigen::Isometry3d T_base_camera = Eigen::Isometry3d::Identity();
-  Eigen::Isometry3d T_flange_laser = Eigen::Isometry3d::Identity();
-  std::shared_ptr<const UndistortionMap> undistortion;  ///< built on first use when empty
-  static ScannerCalibration fromScene(const Scene& scene);
-  /// From a calibration folder (camera_info YAML + transform YAMLs, as calibration_publisher
-  /// loads it). Throws ConfigError naming what is missing.
-  static ScannerCalibration fromFolder(const std::string& dir, const std::string& camera_frame = "scanner_camera_optical",
-                                       const std::string& laser_frame = "laser",
-                                       const std::string& camera_name = "scanner_camera");
-};
+/// The simulator's true scanner calibration (the scene's camera, intrinsics and laser mount).
+ScannerCalibration scannerCalibrationOf(const Scene& scene);
 
 struct SimScanStats {
   size_t frames = 0;
   LineExtractionStats line;  ///< summed over frames (background: last frame)
   double render_seconds = 0, process_seconds = 0;
 };
-
-/// Whether the laser line runs along image rows: the sheet's trace on a surface facing the
-/// camera runs along n × z (camera frame), i.e. along u when |n_y| ≥ |n_x|. Decides the
-/// extraction direction (the same rule in the ROS node and in-process).
-bool lineAlongRows(const Plane& plane_camera);
-
-/// One frame: line → profile points in the base frame (appended to `cloud`). The extraction
-/// direction follows lineAlongRows() unless `auto_direction` is false.
-void addProfile(const cv::Mat& image, const Eigen::Isometry3d& T_base_flange,
-                const ScannerCalibration& cal, const LineExtractionConfig& line,
-                const TriangulationConfig& tri, ScanCloud& cloud, LineExtractionStats* stats = nullptr,
-                bool auto_direction = true);
 
 /// Scans along `poses` (the poses the robot is told and reports; with `robot`, the frames are
 /// rendered where its flange really goes) and triangulates with `cal`.
