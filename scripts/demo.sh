@@ -118,6 +118,32 @@ done
 t_asm=$(now)
 sleep 3  # let rviz draw the last frame
 screenshot "$OUT/rviz.png"
+# rviz must be alive and show the located parts and the scan; if not, it is started once more
+# (its topics are latched) and the demo fails when that draws nothing either
+rviz_problem() {
+  if [ -n "${RVIZ_PID:-}" ]; then
+    kill -0 "$RVIZ_PID" 2>/dev/null || { echo "rviz died (see $OUT/logs/rviz_retry.log)"; return; }
+  elif grep -q "\[rviz-[0-9]*\] process has died" "$OUT/launch.log"; then
+    echo "rviz died: $(grep "\[rviz-[0-9]*\] process has died" "$OUT/launch.log" | tail -1 | cut -c1-160)"
+    return
+  fi
+  rviz_drawing_problem "$OUT/rviz.png"
+}
+problem=$(rviz_problem)
+if [ -n "$problem" ]; then
+  echo "demo: rviz: $problem; starting rviz again" >&2
+  rosnode kill /rviz >/dev/null 2>&1
+  rviz -d rviz/cell.rviz >"$OUT/logs/rviz_retry.log" 2>&1 &
+  RVIZ_PID=$!
+  sleep 20
+  screenshot "$OUT/rviz.png"
+  problem=$(rviz_problem)
+  kill -INT "$RVIZ_PID" 2>/dev/null
+  if [ -n "$problem" ]; then
+    echo "demo: FAILED: rviz: $problem" >&2
+    exit 1
+  fi
+fi
 # What the 2 MP frames cost between processes (nodelets pass them by pointer inside the manager).
 FRAMES=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["frames"])' "$OUT/scan_result.json")
 if /usr/bin/python3 scripts/topic-bytes.py /scanner_camera/image_raw --frames "$FRAMES" >"$OUT/image_bytes.json.tmp"; then

@@ -21,7 +21,7 @@ PACKAGES=(
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure
   librosbag-dev python3-rosbag librostest-dev python3-rostest python3-roslaunch python3-rosmaster rosout
   rosbash python3-rostopic python3-rosservice python3-rosnode python3-rosparam
-  python3-rospy python3-sensor-msgs python3-geometry-msgs python3-tf2-ros python3-nose python3-yaml
+  python3-rospy python3-sensor-msgs python3-geometry-msgs python3-visualization-msgs python3-tf2-ros python3-nose python3-yaml
   rviz
   # core libraries
   libeigen3-dev libopencv-dev libyaml-cpp-dev nlohmann-json3-dev libembree-dev libtbb-dev

@@ -1,5 +1,6 @@
 // Every translation between core types and ROS messages lives here (round-trip tested).
 #pragma once
+#include <geometry_msgs/Point.h>
 #include <geometry_msgs/Pose.h>
 #include <geometry_msgs/Transform.h>
 #include <geometry_msgs/TransformStamped.h>
@@ -14,6 +15,7 @@
 
 #include "cellsight/common/calibration.hpp"
 #include "cellsight/common/camera_model.hpp"
+#include "cellsight/common/mesh.hpp"
 #include "cellsight/common/plane.hpp"
 #include "cellsight/common/scan_cloud.hpp"
 #include "cellsight/Detection.h"
@@ -30,6 +32,9 @@ struct PartDetection;
 namespace cellsight_ros {
 
 geometry_msgs::Pose toPoseMsg(const Eigen::Isometry3d& T);
+/// A mesh as the points of an rviz TRIANGLE_LIST marker (three per face, mesh frame); rviz draws
+/// these itself, where a MESH_RESOURCE goes through its assimp loader.
+std::vector<geometry_msgs::Point> meshTriangles(const cellsight::TriangleMesh& mesh);
 Eigen::Isometry3d fromPoseMsg(const geometry_msgs::Pose& msg);
 geometry_msgs::Transform toTransformMsg(const Eigen::Isometry3d& T);
 Eigen::Isometry3d fromTransformMsg(const geometry_msgs::Transform& msg);

@@ -27,7 +27,11 @@ class CalibrationPublisher {
       return oldest_ > 0 ? std::to_string((std::time(nullptr) - oldest_) / 86400.0) : std::string("unknown");
     });
     folder_ = cellsight_ros::requireParam<std::string>(
-        pnh, "calibration_dir", "folder of calibration YAML files, e.g. config/calibration");
+        pnh, "calibration_dir", "folder of calibration YAML files, e.g. out/demo/calibration");
+    if (folder_.empty())
+      throw std::runtime_error("no calibration folder: give the cell's, e.g. roslaunch cellsight cell.launch "
+                               "calibration_dir:=/path/to/calibration (camera_info and transform YAMLs, as "
+                               "cellsight_calibrate writes them)");
     double wait_seconds = 0.0;
     cellsight_ros::param(pnh, "wait_seconds", wait_seconds);
     // With ~wait_seconds > 0 the folder may appear later (e.g. written by the simulator at its

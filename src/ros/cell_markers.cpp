@@ -35,16 +35,7 @@ visualization_msgs::MarkerArray cellMarkers(const cellsight::Scene& s) {
     visualization_msgs::Marker m = base("objects");
     m.type = visualization_msgs::Marker::TRIANGLE_LIST;
     m.pose = cellsight_ros::toPoseMsg(o.T_base_object);
-    const cellsight::TriangleMesh mesh = cellsight::loadValidMesh(o.info.mesh_file);
-    for (const auto& f : mesh.faces) {
-      for (int k = 0; k < 3; ++k) {
-        geometry_msgs::Point p;
-        p.x = mesh.vertices[f[k]].x();
-        p.y = mesh.vertices[f[k]].y();
-        p.z = mesh.vertices[f[k]].z();
-        m.points.push_back(p);
-      }
-    }
+    m.points = cellsight_ros::meshTriangles(cellsight::loadValidMesh(o.info.mesh_file));
     m.color.r = 0.2f + 0.6f * static_cast<float>(o.reflectivity);
     m.color.g = 0.55f;
     m.color.b = 0.75f;

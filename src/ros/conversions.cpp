@@ -26,6 +26,21 @@ geometry_msgs::Pose toPoseMsg(const Eigen::Isometry3d& T) {
   return p;
 }
 
+std::vector<geometry_msgs::Point> meshTriangles(const cellsight::TriangleMesh& mesh) {
+  std::vector<geometry_msgs::Point> points;
+  points.reserve(mesh.faces.size() * 3);
+  for (const auto& f : mesh.faces) {
+    for (int k = 0; k < 3; ++k) {
+      geometry_msgs::Point p;
+      p.x = mesh.vertices[f[k]].x();
+      p.y = mesh.vertices[f[k]].y();
+      p.z = mesh.vertices[f[k]].z();
+      points.push_back(p);
+    }
+  }
+  return points;
+}
+
 Eigen::Isometry3d fromPoseMsg(const geometry_msgs::Pose& p) {
   Eigen::Quaterniond q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
   if (!std::isfinite(q.norm()) || q.norm() < 1e-6) {

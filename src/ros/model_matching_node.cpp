@@ -157,12 +157,18 @@ class ModelMatching {
     }
     cellsight::DetectionArray out;
     std::string why;
-    if (!locate(*msg, {}, &out, &why)) {
-      ROS_ERROR("model_matching: clusters at %.3f dropped: %s", msg->header.stamp.toSec(), why.c_str());
-      diag_.dropped("no scanner camera transform at the scan's stamp");
-      return;
+    try {
+      if (!locate(*msg, {}, &out, &why)) {
+        ROS_ERROR("model_matching: clusters at %.3f dropped: %s", msg->header.stamp.toSec(), why.c_str());
+        diag_.dropped("no scanner camera transform at the scan's stamp");
+        return;
+      }
+      publish(out);
+    } catch (const std::exception& e) {  // e.g. a cluster far outside any workspace
+      ROS_ERROR("model_matching: clusters at %.3f dropped: they cannot be located: %s (is the scan cropped to the "
+                "workspace?)", msg->header.stamp.toSec(), e.what());
+      diag_.dropped("clusters that cannot be located");
     }
-    publish(out);
   }
 
   bool onLocate(cellsight::LocateObjects::Request& req, cellsight::LocateObjects::Response& res) {
@@ -187,10 +193,16 @@ class ModelMatching {
       }
     }
     std::string why;
-    const bool ok = locate(*clusters, req.models, &res.detections, &why);
-    res.status = ok ? Res::OK : Res::NO_TRANSFORM;
-    res.message = ok ? std::to_string(res.detections.detections.size()) + " detections" : why;
-    if (ok) publish(res.detections, req.models);
+    try {
+      const bool ok = locate(*clusters, req.models, &res.detections, &why);
+      res.status = ok ? Res::OK : Res::NO_TRANSFORM;
+      res.message = ok ? std::to_string(res.detections.detections.size()) + " detections" : why;
+      if (ok) publish(res.detections, req.models);
+    } catch (const std::exception& e) {
+      res.status = Res::FAILED;
+      res.message = std::string("the latest clusters cannot be located: ") + e.what();
+      res.detections = cellsight::DetectionArray();
+    }
     return true;
   }
 
@@ -300,14 +312,16 @@ class ModelMatching {
       m.header = out.header;
       m.ns = "detections";
       m.id = id++;
-      m.type = visualization_msgs::Marker::MESH_RESOURCE;
-      m.mesh_resource = "file://" + library_->model(d.model).info.mesh_file;
+      // the mesh's triangles (a MESH_RESOURCE goes through rviz's assimp loader); a cloud model: a 1 cm ball
+      const cellsight::TriangleMesh& mesh = library_->model(d.model).mesh;
+      m.type = mesh.faces.empty() ? visualization_msgs::Marker::SPHERE : visualization_msgs::Marker::TRIANGLE_LIST;
+      m.points = cellsight_ros::meshTriangles(mesh);
       m.pose = d.pose;
-      m.scale.x = m.scale.y = m.scale.z = 1.0;
-      m.color.r = 0.2f;
-      m.color.g = 0.5f;
-      m.color.b = 1.0f;
-      m.color.a = 0.8f;
+      m.scale.x = m.scale.y = m.scale.z = mesh.faces.empty() ? 0.01 : 1.0;
+      m.color.r = 0.9f;  // magenta: no other marker of the cell's rviz view is (scripts/rviz-shot.sh counts it)
+      m.color.g = 0.1f;
+      m.color.b = 0.8f;
+      m.color.a = 0.9f;
       markers.markers.push_back(m);
       ROS_INFO("model_matching: %s = %s at (%.4f, %.4f, %.4f), fitness %.2f, coverage %.2f, rmse %.3f mm", d.name.c_str(),
                d.model.c_str(), d.pose.position.x, d.pose.position.y, d.pose.position.z, d.fitness, d.coverage,

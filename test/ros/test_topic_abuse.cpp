@@ -261,6 +261,17 @@ TEST(TopicAbuse, EveryNodeLivesServesAndKeepsItsMemory) {
     arr.clusters.push_back(cl);
   }
   publishAll(clusters_pub, std::vector<cellsight::ClusterArray>{arr});
+  // a readable cluster on the table with one point 1e8 m away: the matcher cannot grid it, and
+  // the node must say so and go on, not die
+  std::vector<std::array<float, 3>> far;
+  for (int i = 0; i < 20; ++i)
+    for (int j = 0; j < 20; ++j) far.push_back({0.5f + 0.001f * i, 0.001f * j, 0.01f});
+  far.push_back({1e8f, 0.f, 0.f});
+  cellsight::ClusterArray far_arr;
+  far_arr.header = arr.header;
+  far_arr.clusters.emplace_back();
+  far_arr.clusters.back().cloud = xyzCloud(far, arr.header.stamp);
+  publishAll(clusters_pub, std::vector<cellsight::ClusterArray>{far_arr});
 
   // triangulation and laser_plane_tracker: the bad camera_infos, then a good one and bad images
   // paired with a laser plane of the same stamp (so each reaches the image conversion)
