@@ -32,6 +32,7 @@ struct PartDetection;
 namespace cellsight_ros {
 
 geometry_msgs::Pose toPoseMsg(const Eigen::Isometry3d& T);
+geometry_msgs::Point toPointMsg(const Eigen::Vector3f& p);
 /// A mesh as the points of an rviz TRIANGLE_LIST marker (three per face, mesh frame); rviz draws
 /// these itself, where a MESH_RESOURCE goes through its assimp loader.
 std::vector<geometry_msgs::Point> meshTriangles(const cellsight::TriangleMesh& mesh);

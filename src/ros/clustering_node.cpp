@@ -13,14 +13,6 @@
 
 namespace {
 
-geometry_msgs::Point point(const Eigen::Vector3f& p) {
-  geometry_msgs::Point q;
-  q.x = p.x();
-  q.y = p.y();
-  q.z = p.z();
-  return q;
-}
-
 class Clustering {
  public:
   Clustering(ros::NodeHandle& nh, ros::NodeHandle& pnh) : diag_(nh, pnh, "clustering", "scans") {
@@ -50,7 +42,7 @@ class Clustering {
         m.ns = "clusters";
         m.id = id++;
         m.type = visualization_msgs::Marker::CUBE;
-        m.pose.position = point(c.box.center());
+        m.pose.position = cellsight_ros::toPointMsg(c.box.center());
         m.pose.orientation.w = 1;
         m.scale.x = std::max(1e-3f, c.box.sizes().x());
         m.scale.y = std::max(1e-3f, c.box.sizes().y());

@@ -26,6 +26,14 @@ geometry_msgs::Pose toPoseMsg(const Eigen::Isometry3d& T) {
   return p;
 }
 
+geometry_msgs::Point toPointMsg(const Eigen::Vector3f& p) {
+  geometry_msgs::Point q;
+  q.x = p.x();
+  q.y = p.y();
+  q.z = p.z();
+  return q;
+}
+
 std::vector<geometry_msgs::Point> meshTriangles(const cellsight::TriangleMesh& mesh) {
   std::vector<geometry_msgs::Point> points;
   points.reserve(mesh.faces.size() * 3);

@@ -345,16 +345,7 @@ class GraspPlannerNode {
     arr.markers.push_back(cands);
     visualization_msgs::Marker target = marker("target", 0, visualization_msgs::Marker::TRIANGLE_LIST);
     target.pose = cellsight_ros::toPoseMsg(p.T_base_target);
-    const auto& mesh = *models_.at(p.part.model).second;
-    for (const auto& f : mesh.faces) {
-      for (int k = 0; k < 3; ++k) {
-        geometry_msgs::Point pt;
-        pt.x = mesh.vertices[f[k]].x();
-        pt.y = mesh.vertices[f[k]].y();
-        pt.z = mesh.vertices[f[k]].z();
-        target.points.push_back(pt);
-      }
-    }
+    target.points = cellsight_ros::meshTriangles(*models_.at(p.part.model).second);
     target.color.r = 0.2f;
     target.color.g = 0.9f;
     target.color.b = 0.3f;

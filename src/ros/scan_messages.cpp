@@ -9,14 +9,6 @@
 namespace cellsight_ros {
 
 namespace {
-geometry_msgs::Point point(const Eigen::Vector3f& p) {
-  geometry_msgs::Point q;
-  q.x = p.x();
-  q.y = p.y();
-  q.z = p.z();
-  return q;
-}
-
 sensor_msgs::PointCloud2 pointsMsg(const std::vector<Eigen::Vector3f>& points, const std_msgs::Header& header) {
   cellsight::ScanCloud c;
   for (const auto& p : points) c.append(p, 0.f);
@@ -51,9 +43,9 @@ cellsight::ClusterArray toClusterArrayMsg(const cellsight::ClusteringResult& r, 
     cellsight::Cluster cm;
     cm.cloud = toCloudMsg(c.cloud, header.stamp);
     cm.cloud.header.frame_id = header.frame_id;
-    cm.centroid = point(c.centroid);
-    cm.box_min = point(c.box.min());
-    cm.box_max = point(c.box.max());
+    cm.centroid = toPointMsg(c.centroid);
+    cm.box_min = toPointMsg(c.box.min());
+    cm.box_max = toPointMsg(c.box.max());
     out.clusters.push_back(std::move(cm));
   }
   return out;
