@@ -212,6 +212,10 @@ class Triangulation {
     std::stable_sort(profiles_.begin(), profiles_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     cellsight::ScanCloud scan;
     scan.frame_id = base_frame_;
+    size_t n = 0;
+    for (const auto& f : profiles_) n += f.second.size();
+    scan.points.reserve(n);  // one allocation per scan, not a growing one
+    scan.intensity.reserve(n);
     for (const auto& [stamp, p] : profiles_)
       for (size_t i = 0; i < p.size(); ++i) scan.append(p.points[i], p.intensity[i]);
     return scan;
@@ -219,7 +223,7 @@ class Triangulation {
 
   bool onReset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     std::lock_guard<std::mutex> lock(mutex_);
-    profiles_.clear();
+    std::vector<std::pair<ros::Time, cellsight::ScanCloud>>().swap(profiles_);  // memory back, not kept
     frames_ = 0;
     last_stamp_ = ros::Time();
     held_.clear();
