@@ -1,16 +1,19 @@
 #!/usr/bin/env python3
 """Two detections files (model_matching's format) hold the same parts: the same count (at least
 one), names and models, positions and quaternions within TOL (m; unitless for the quaternion),
-fitness within 1e-9. Usage: same_detections.py A.json B.json TOL. Exit 0 same, 1 different."""
+fitness within 1e-9, the same passes (their roles in order). Usage: same_detections.py A.json B.json TOL. Exit 0 same, 1 different."""
 import json
 import sys
 
 
 def main():
     a_path, b_path, tol = sys.argv[1], sys.argv[2], float(sys.argv[3])
-    a = json.load(open(a_path))["detections"]
-    b = json.load(open(b_path))["detections"]
+    ja, jb = json.load(open(a_path)), json.load(open(b_path))
+    a, b = ja["detections"], jb["detections"]
     print("same_detections: %d in %s, %d in %s" % (len(a), a_path, len(b), b_path))
+    if ja.get("passes", []) != jb.get("passes", []):
+        print("different: passes %s against %s" % (ja.get("passes"), jb.get("passes")))
+        return 1
     if not a or len(a) != len(b):
         print("different: %d against %d detections (at least one needed)" % (len(a), len(b)))
         return 1

@@ -64,42 +64,51 @@ void checkPasses(const std::vector<ScanPass>& passes) {
 
 }  // namespace
 
+void addPass(const ModelMatcher& matcher, const std::vector<ScanPass>& passes, LocatedScan* so_far,
+             const std::vector<std::string>& models) {
+  const size_t k = so_far->passes.size();
+  if (k >= passes.size())
+    throw std::invalid_argument("addPass: all " + std::to_string(passes.size()) + " passes are located already");
+  checkPasses({passes.begin(), passes.begin() + static_cast<std::ptrdiff_t>(k + 1)});
+  LocatedScan& out = *so_far;
+  const ScanPass& pass = passes[k];
+  if (k == 0) {
+    out.passes.push_back(locatePass(matcher, pass, pass.evidence.support_points, models));
+    out.stats = out.passes.front().stats;
+    out.parts = out.passes.front().found;
+  } else if (pass.role == PassRole::kAddDetections) {
+    // the cell stands still between passes: where any pass saw the table, no part is
+    std::vector<Eigen::Vector3f> seen = pass.evidence.support_points;
+    for (size_t j = 0; j < k; ++j)
+      seen.insert(seen.end(), passes[j].evidence.support_points.begin(), passes[j].evidence.support_points.end());
+    PassResult r = locatePass(matcher, pass, seen, models);
+    out.parts = matcher.mergePasses(out.parts, r.found, &out.stats);
+    for (auto rejected : r.stats.rejected) {
+      rejected.pass = 1;
+      out.stats.rejected.push_back(std::move(rejected));
+    }
+    out.stats.seconds += r.stats.seconds;
+    out.passes.push_back(std::move(r));
+  } else {
+    // this pass's points above the support with every earlier pass's: each pins what the
+    // others leave loose (one runs along the edges another crosses)
+    const ScanEvidence& first = passes.front().evidence;
+    ScanCloud above;
+    for (size_t j = k + 1; j-- > 0;)
+      for (const auto& c : passes[j].clusters) above.points.insert(above.points.end(), c.points.begin(), c.points.end());
+    PassResult r;
+    r.found = matcher.refine(above, out.parts, &r.stats, ptr(first.viewpoint), ptr(first.support_plane));
+    out.parts = r.found;
+    out.stats.warnings.insert(out.stats.warnings.end(), r.stats.warnings.begin(), r.stats.warnings.end());
+    out.stats.seconds += r.stats.seconds;
+    out.passes.push_back(std::move(r));
+  }
+}
+
 LocatedScan locateScan(const ModelMatcher& matcher, const std::vector<ScanPass>& passes, const std::vector<std::string>& models) {
   checkPasses(passes);
   LocatedScan out;
-  const ScanEvidence& first = passes.front().evidence;
-  out.passes.push_back(locatePass(matcher, passes.front(), first.support_points, models));
-  out.stats = out.passes.front().stats;
-  out.parts = out.passes.front().found;
-  for (size_t k = 1; k < passes.size(); ++k) {
-    const ScanPass& pass = passes[k];
-    if (pass.role == PassRole::kAddDetections) {
-      // the cell stands still between passes: where any pass saw the table, no part is
-      std::vector<Eigen::Vector3f> seen = pass.evidence.support_points;
-      for (size_t j = 0; j < k; ++j)
-        seen.insert(seen.end(), passes[j].evidence.support_points.begin(), passes[j].evidence.support_points.end());
-      PassResult r = locatePass(matcher, pass, seen, models);
-      out.parts = matcher.mergePasses(out.parts, r.found, &out.stats);
-      for (auto rejected : r.stats.rejected) {
-        rejected.pass = 1;
-        out.stats.rejected.push_back(std::move(rejected));
-      }
-      out.stats.seconds += r.stats.seconds;
-      out.passes.push_back(std::move(r));
-    } else {
-      // this pass's points above the support with every earlier pass's: each pins what the
-      // others leave loose (one runs along the edges another crosses)
-      ScanCloud above;
-      for (size_t j = k + 1; j-- > 0;)
-        for (const auto& c : passes[j].clusters) above.points.insert(above.points.end(), c.points.begin(), c.points.end());
-      PassResult r;
-      r.found = matcher.refine(above, out.parts, &r.stats, ptr(first.viewpoint), ptr(first.support_plane));
-      out.parts = r.found;
-      out.stats.warnings.insert(out.stats.warnings.end(), r.stats.warnings.begin(), r.stats.warnings.end());
-      out.stats.seconds += r.stats.seconds;
-      out.passes.push_back(std::move(r));
-    }
-  }
+  for (size_t k = 0; k < passes.size(); ++k) addPass(matcher, passes, &out, models);
   return out;
 }
 

@@ -43,10 +43,16 @@ int main(int argc, char** argv) {
       return 1;
     }
   }
-  // the parts must have been located first
-  if (!ros::topic::waitForMessage<cellsight::DetectionArray>("detections", nh, ros::Duration(detections_timeout))) {
-    ROS_ERROR("assembly_client: no detections within %.0f s: scan and locate first", detections_timeout);
-    return 1;
+  // the parts must have been located first, on every pass of the cycle
+  const ros::Time located_by = ros::Time::now() + ros::Duration(detections_timeout);
+  for (;;) {
+    const auto d = ros::topic::waitForMessage<cellsight::DetectionArray>("detections", nh, located_by - ros::Time::now());
+    if (d && d->final) break;
+    if (!d || ros::Time::now() >= located_by || !ros::ok()) {
+      ROS_ERROR("assembly_client: no detections of a whole cycle (its last pass) within %.0f s: scan and locate first",
+                detections_timeout);
+      return 1;
+    }
   }
   nlohmann::json steps = nlohmann::json::array();
   auto write = [&](bool done) {

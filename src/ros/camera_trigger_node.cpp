@@ -24,6 +24,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "cellsight/FinishScan.h"
+#include "cellsight/CyclePass.h"
 #include "cellsight/MoveFlange.h"
 #include "cellsight/ScanAction.h"
 #include "cellsight/common/file_io.hpp"
@@ -148,6 +149,13 @@ class CameraTrigger {
       result.message = err;
       return;
     }
+    if (goal.role > cellsight::CyclePass::REFINE || (goal.role != cellsight::CyclePass::DETECT && goal.cycle_id.empty())) {
+      result.status = ScanResult::INVALID_GOAL;
+      result.message = goal.role > cellsight::CyclePass::REFINE
+                           ? "unknown role " + std::to_string(goal.role) + " (cellsight/CyclePass: 0 detect, 1 add_detections, 2 refine)"
+                           : "a later pass (role " + std::to_string(goal.role) + ") needs the cycle_id of its detect pass";
+      return;
+    }
     if (!std::isfinite(goal.speed_scale) || goal.speed_scale < 0 || goal.speed_scale > 1) {
       result.status = ScanResult::INVALID_GOAL;
       result.message = "speed_scale must lie in [0, 1] (0: the default 0.1), got " + std::to_string(goal.speed_scale);
@@ -176,6 +184,9 @@ class CameraTrigger {
       ROS_WARN("camera_trigger: scan/reset and scan/finish not available: frames are captured but no cloud is made");
     }
     frames_ = nlohmann::json::array();
+    // a cycle's later passes keep their frames beside the first's: frames_pass<k>.json, images/pass<k>_*
+    pass_in_cycle_ = goal.role == cellsight::CyclePass::DETECT || goal.cycle_id != cycle_id_ ? 0 : pass_in_cycle_ + 1;
+    cycle_id_ = goal.cycle_id;
     if (!save_dir_.empty()) cellsight::makeDirs(save_dir_ + "/images");
     const ros::WallTime t0 = ros::WallTime::now();
     uint32_t captured = 0;
@@ -190,6 +201,9 @@ class CameraTrigger {
       fin.request.output_file = goal.output_file;
       fin.request.expected_frames = captured;
       fin.request.wait_frames_timeout = processing_timeout_;
+      fin.request.cycle_id = goal.cycle_id;
+      fin.request.role = goal.role;
+      fin.request.last_pass = goal.last_pass;
       if (!finish_client_.call(fin)) {
         result.status = ScanResult::PROCESSING_FAILED;
         result.message = "call to scan/finish failed (triangulation node gone?)";
@@ -411,7 +425,7 @@ class CameraTrigger {
       }
       if (image->encoding == sensor_msgs::image_encodings::RGB8) cv::cvtColor(out, out, cv::COLOR_RGB2BGR);
       char name[64];
-      std::snprintf(name, sizeof(name), "images/frame_%04d.png", index);
+      std::snprintf(name, sizeof(name), "images/%sframe_%04d.png", passPrefix().c_str(), index);
       if (!cv::imwrite(save_dir_ + "/" + name, out)) {
         ROS_ERROR("camera_trigger: cannot write %s/%s", save_dir_.c_str(), name);
         diag_.dropped("image not written");
@@ -431,8 +445,14 @@ class CameraTrigger {
     j["poses"] = poses;
     j["frames"] = frames_;
     j["scan_seconds"] = seconds;
-    cellsight::writeFileAtomic(save_dir_ + "/frames.json", j.dump(2) + "\n");
+    j["cycle_id"] = cycle_id_;
+    j["pass"] = pass_in_cycle_;
+    const std::string file = pass_in_cycle_ ? "frames_pass" + std::to_string(pass_in_cycle_) + ".json" : "frames.json";
+    cellsight::writeFileAtomic(save_dir_ + "/" + file, j.dump(2) + "\n");
   }
+
+  /// "" for a cycle's first pass, "pass<k>_" for its later ones
+  std::string passPrefix() const { return pass_in_cycle_ ? "pass" + std::to_string(pass_in_cycle_) + "_" : ""; }
 
   ros::NodeHandle nh_;
   std::mutex goal_mutex_;
@@ -458,6 +478,8 @@ class CameraTrigger {
   bool recording_ = false;
   std::vector<sensor_msgs::ImageConstPtr> recorded_;
   nlohmann::json frames_ = nlohmann::json::array();
+  std::string cycle_id_;   // the latest goal's cycle and the pass it was in it (0: its first)
+  int pass_in_cycle_ = 0;
 };
 
 }  // namespace

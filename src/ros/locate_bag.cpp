@@ -1,9 +1,11 @@
 // cellsight_locate_bag: a recorded scan (a raw bag: scanner images, camera_info, /tf, /tf_static)
 // located in one process by the functions the nodes run, in the nodes' order: per frame the
 // light sheet from tf (laser_plane_tracker), the profile (triangulation), the scan's finish, the
-// clusters as the clustering node publishes them, one detect pass (model_matching), named and
-// written as model_matching writes its detections file. The ctest replay_equivalence holds it
-// to the nodes' result on the same bag. Exit 0 with detections, 3 with none, 1 on an error.
+// clusters as the clustering node publishes them, the cycle's passes located one by one as
+// model_matching does (the passes and their roles from the Scan goals the bag recorded on
+// /scan/goal; none recorded: one detect pass), named and written as model_matching writes its
+// detections file. The ctests replay_equivalence and cycle_passes hold it to the nodes' result on
+// the same bag. Exit 0 with detections, 3 with none, 1 on an error.
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <sensor_msgs/CameraInfo.h>
@@ -17,6 +19,7 @@
 #include <memory>
 
 #include "../tools/cli_args.hpp"
+#include "cellsight/ScanActionGoal.h"
 #include "cellsight/common/file_io.hpp"
 #include "cellsight/localization/instance_names.hpp"
 #include "cellsight/scanner/scan_pipeline.hpp"
@@ -29,6 +32,7 @@ struct Options {
   std::string bag, root = ".", scanner, clustering, matching, models, json, cloud;
   std::string base_frame = "base_link", laser_frame = "laser", camera_frame = "scanner_camera_optical";
   std::string image_topic = "/scanner_camera/image_raw", info_topic = "/scanner_camera/camera_info";
+  std::string goal_topic = "/scan/goal";
   std::string orRoot(const std::string& v, const std::string& rel) const { return v.empty() ? root + "/" + rel : v; }
 };
 
@@ -51,20 +55,43 @@ void loadTf(const rosbag::Bag& bag, tf2::BufferCore* tf) {
   }
 }
 
-RecordedScan scanFromBag(const rosbag::Bag& bag, const tf2::BufferCore& tf, const Options& o,
-                         const cellsight::ScannerSettings& settings) {
-  std::shared_ptr<cellsight::UndistortionMap> map;
+/// A pass of the recorded cycle: the Scan goal that started it and the frames taken after it.
+struct RecordedPass {
+  cellsight::ScanGoal goal;  // no goal recorded: a detect pass on its own
   std::vector<sensor_msgs::ImageConstPtr> images;
-  for (const rosbag::MessageInstance& m : rosbag::View(bag, rosbag::TopicQuery(std::vector<std::string>{o.info_topic, o.image_topic}))) {
+};
+
+/// The bag's scanner frames split into the passes its Scan goals started (a frame belongs to the
+/// latest goal sent before it), and the camera's undistortion from its first camera_info.
+std::vector<RecordedPass> passesFromBag(const rosbag::Bag& bag, const Options& o, std::shared_ptr<cellsight::UndistortionMap>* map) {
+  std::vector<sensor_msgs::ImageConstPtr> images;
+  std::vector<std::pair<ros::Time, cellsight::ScanGoal>> goals;
+  for (const rosbag::MessageInstance& m :
+       rosbag::View(bag, rosbag::TopicQuery(std::vector<std::string>{o.info_topic, o.image_topic, o.goal_topic}))) {
     if (const auto info = m.instantiate<sensor_msgs::CameraInfo>()) {
-      if (!map) map = std::make_shared<cellsight::UndistortionMap>(cellsight_ros::fromCameraInfo(*info));
+      if (!*map) *map = std::make_shared<cellsight::UndistortionMap>(cellsight_ros::fromCameraInfo(*info));
     } else if (const auto image = m.instantiate<sensor_msgs::Image>()) {
       images.push_back(image);
+    } else if (const auto goal = m.instantiate<cellsight::ScanActionGoal>()) {
+      goals.emplace_back(goal->header.stamp, goal->goal);
     }
   }
   if (images.empty()) throw std::runtime_error(o.bag + ": no images on " + o.image_topic);
-  if (!map) throw std::runtime_error(o.bag + ": no camera_info on " + o.info_topic);
+  if (!*map) throw std::runtime_error(o.bag + ": no camera_info on " + o.info_topic);
   std::stable_sort(images.begin(), images.end(), [](const auto& a, const auto& b) { return a->header.stamp < b->header.stamp; });
+  std::stable_sort(goals.begin(), goals.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<RecordedPass> passes(std::max<size_t>(goals.size(), 1));
+  for (size_t k = 0; k < goals.size(); ++k) passes[k].goal = goals[k].second;
+  size_t k = 0;
+  for (const auto& image : images) {
+    while (k + 1 < goals.size() && image->header.stamp >= goals[k + 1].first) ++k;
+    passes[k].images.push_back(image);
+  }
+  return passes;
+}
+
+RecordedScan scanFromBag(const std::vector<sensor_msgs::ImageConstPtr>& images, const cellsight::UndistortionMap& undistort,
+                         const tf2::BufferCore& tf, const Options& o, const cellsight::ScannerSettings& settings) {
   RecordedScan out;
   out.cloud.frame_id = o.base_frame;
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();
@@ -81,7 +108,7 @@ RecordedScan scanFromBag(const rosbag::Bag& bag, const tf2::BufferCore& tf, cons
           cellsight_ros::fromTransformMsg(tf.lookupTransform(o.base_frame, image->header.frame_id, t).transform);
       const Eigen::Isometry3d T_base_laser =
           cellsight_ros::fromTransformMsg(tf.lookupTransform(o.base_frame, o.laser_frame, t).transform);
-      cellsight::addFrameProfile(cellsight_ros::fromImageMsg(*image), plane, T_base_camera, *map,
+      cellsight::addFrameProfile(cellsight_ros::fromImageMsg(*image), plane, T_base_camera, undistort,
                                  cellsight_ros::lineConfigFor(image->encoding, settings.line), settings.triangulation,
                                  out.cloud);
       viewpoint = T_base_camera.translation().cast<float>();
@@ -112,33 +139,56 @@ int run(const Options& o) {
   bag.open(o.bag, rosbag::bagmode::Read);
   tf2::BufferCore tf(ros::Duration(std::max(10.0, (rosbag::View(bag).getEndTime() - rosbag::View(bag).getBeginTime()).toSec() + 10)));
   loadTf(bag, &tf);
-  const RecordedScan scan = scanFromBag(bag, tf, o, settings);
-  if (scan.cloud.size() == 0) throw std::runtime_error(o.bag + ": the scan is empty: no laser line in any frame");
-  if (!o.cloud.empty()) cellsight::saveCloud(o.cloud, scan.cloud);
-  std_msgs::Header header;
-  header.frame_id = o.base_frame;
-  header.stamp = scan.stamp;
-  const cellsight::ClusterArray clusters = cellsight_ros::toClusterArrayMsg(cellsight::clusterScene(scan.cloud, clustering), header);
-  // model_matching: the camera at the clusters' stamp, the sweep when the illumination test is on
-  const Eigen::Vector3f eye = cellsight_ros::fromTransformMsg(tf.lookupTransform(o.base_frame, o.camera_frame, scan.stamp).transform)
-                                  .translation()
-                                  .cast<float>();
+  std::shared_ptr<cellsight::UndistortionMap> map;
+  const std::vector<RecordedPass> recorded = passesFromBag(bag, o, &map);
+  std::vector<cellsight::ScanPass> passes;
+  cellsight::LocatedScan located;
   cellsight::DetectionArray out;
-  cellsight::ScanPass pass = cellsight_ros::toScanPass(clusters, eye, &out.warnings);
-  if (matcher.config().check_illumination) pass.evidence.light = scan.light;
-  const size_t n_clusters = pass.clusters.size();
-  const cellsight::LocatedScan located = cellsight::locateScan(matcher, {std::move(pass)});
-  out.header = header;
-  out.clusters = static_cast<uint32_t>(n_clusters);
-  out.locate_seconds = located.stats.seconds;
-  out.warnings.insert(out.warnings.end(), located.stats.warnings.begin(), located.stats.warnings.end());
-  std::vector<cellsight::NamedInstance> current;
-  for (const auto& d : located.parts) current.push_back({d.model, "", d.pose.translation()});
-  const std::vector<std::string> names = cellsight::assignInstanceNames({}, current);
-  for (size_t i = 0; i < located.parts.size(); ++i) out.detections.push_back(cellsight_ros::toDetectionMsg(located.parts[i], names[i]));
+  std::vector<cellsight::NamedInstance> named;  // the latest detections, as model_matching names against them
+  size_t frames = 0, dropped = 0, points = 0;
+  for (const RecordedPass& p : recorded) {
+    const RecordedScan scan = scanFromBag(p.images, *map, tf, o, settings);
+    frames += scan.frames;
+    dropped += scan.dropped;
+    points += scan.cloud.size();
+    if (scan.cloud.size() == 0) throw std::runtime_error(o.bag + ": a pass's scan is empty: no laser line in any frame");
+    if (!o.cloud.empty() && passes.empty()) cellsight::saveCloud(o.cloud, scan.cloud);
+    std_msgs::Header header;
+    header.frame_id = o.base_frame;
+    header.stamp = scan.stamp;
+    const cellsight::ClusterArray clusters = cellsight_ros::toClusterArrayMsg(cellsight::clusterScene(scan.cloud, clustering), header);
+    // model_matching: the camera at the clusters' stamp, the sweep when the illumination test is on
+    const Eigen::Vector3f eye = cellsight_ros::fromTransformMsg(tf.lookupTransform(o.base_frame, o.camera_frame, scan.stamp).transform)
+                                    .translation()
+                                    .cast<float>();
+    out = cellsight::DetectionArray();
+    cellsight::ScanPass pass = cellsight_ros::toScanPass(clusters, eye, &out.warnings);
+    pass.role = static_cast<cellsight::PassRole>(p.goal.role);
+    if (matcher.config().check_illumination) pass.evidence.light = scan.light;
+    passes.push_back(std::move(pass));
+    cellsight::addPass(matcher, passes, &located);
+    out.header = header;
+    out.clusters = static_cast<uint32_t>(passes.back().clusters.size());
+    out.locate_seconds = located.passes.back().stats.seconds;
+    out.warnings.insert(out.warnings.end(), located.stats.warnings.begin(), located.stats.warnings.end());
+    out.cycle_id = p.goal.cycle_id;
+    for (const RecordedPass& q : recorded) {
+      out.passes.push_back(q.goal.role);
+      if (&q == &p) break;
+    }
+    out.final = p.goal.last_pass || p.goal.cycle_id.empty();
+    std::vector<cellsight::NamedInstance> current;
+    for (const auto& d : located.parts) current.push_back({d.model, "", d.pose.translation()});
+    const std::vector<std::string> names = cellsight::assignInstanceNames(named, current);
+    named.clear();
+    for (size_t i = 0; i < located.parts.size(); ++i) {
+      out.detections.push_back(cellsight_ros::toDetectionMsg(located.parts[i], names[i]));
+      named.push_back({located.parts[i].model, names[i], located.parts[i].pose.translation()});
+    }
+  }
   if (!o.json.empty()) cellsight::writeFileAtomic(o.json, cellsight_ros::detectionsToJson(out).dump(2) + "\n");
-  std::printf("cellsight_locate_bag: %zu frames (%zu dropped), %zu points, %u clusters, %zu parts located in %.3f s\n",
-              scan.frames, scan.dropped, scan.cloud.size(), out.clusters, out.detections.size(), out.locate_seconds);
+  std::printf("cellsight_locate_bag: %zu pass(es), %zu frames (%zu dropped), %zu points, %zu parts located in %.3f s\n",
+              passes.size(), frames, dropped, points, out.detections.size(), located.stats.seconds);
   for (const auto& d : out.detections)
     std::printf("  %s = %s at (%.4f, %.4f, %.4f), fitness %.2f\n", d.name.c_str(), d.model.c_str(), d.pose.position.x,
                 d.pose.position.y, d.pose.position.z, d.fitness);
@@ -167,6 +217,7 @@ int main(int argc, char** argv) {
   app.add_option("--camera-frame", o.camera_frame, "the scanner camera's optical frame (the viewpoint)")->capture_default_str();
   app.add_option("--image-topic", o.image_topic, "scanner images")->capture_default_str();
   app.add_option("--info-topic", o.info_topic, "scanner camera_info")->capture_default_str();
+  app.add_option("--goal-topic", o.goal_topic, "the Scan action's goals (the cycle's passes and their roles)")->capture_default_str();
   app.add_option("--json", o.json, "write the detections here (model_matching's detections file format)");
   app.add_option("--cloud", o.cloud, "write the finished scan here (.ply, .pcd)");
   if (const auto rc = cellsight_tools::parse(app, argc, argv)) return *rc;

@@ -5,7 +5,10 @@
 // visible-surface check is the scanner camera, looked up in tf at the clusters' stamp; without
 // that transform the clusters are dropped with the reason (never an identity). The scan's light
 // sheet (scan/light_sweep, from triangulation, the clusters' stamp) adds the illumination test;
-// without it the fitness counts every camera-visible point, with a warning.
+// without it the fitness counts every camera-visible point, with a warning. A cell cycle may scan
+// several passes (scan/pass, the clusters' stamp: cellsight/ScanPass): the node holds the cycle's
+// passes and locates each on top of the earlier ones (locateScan's addPass), publishing the
+// cycle's parts after every pass; a pass of another cycle is dropped with the reason.
 #include <dynamic_reconfigure/server.h>
 #include <geometry_msgs/TransformStamped.h>
 #include <ros/ros.h>
@@ -20,12 +23,14 @@
 
 #include <algorithm>
 #include <map>
+#include <optional>
 #include <exception>
 #include <mutex>
 #include <cstdlib>
 #include <thread>
 
 #include "cellsight/ClusterArray.h"
+#include "cellsight/CyclePass.h"
 #include "cellsight/DetectionArray.h"
 #include "cellsight/LaserSweep.h"
 #include "cellsight/LocateObjects.h"
@@ -41,6 +46,19 @@
 #include "cellsight_ros/scan_messages.hpp"
 
 namespace {
+
+constexpr size_t kKept = 8;       // scans' sweeps and pass messages kept for pairing by stamp
+constexpr size_t kMaxPasses = 8;  // passes of one cycle
+
+/// A cell cycle's passes so far and what they located.
+struct Cycle {
+  std::string id;
+  std_msgs::Header header;  // the latest pass's
+  std::vector<cellsight::ScanPass> passes;
+  std::vector<uint8_t> roles;  // cellsight/CyclePass roles, per pass
+  cellsight::LocatedScan located;
+  bool final = false;
+};
 
 class ModelMatching {
  public:
@@ -92,8 +110,10 @@ class ModelMatching {
              config_.model_cache_dir.empty() ? "no folder" : config_.model_cache_dir.c_str());
     detections_pub_ = nh.advertise<cellsight::DetectionArray>("detections", 1, true);
     markers_pub_ = nh.advertise<visualization_msgs::MarkerArray>("detections/markers", 1, true);
-    sweep_sub_ = nh.subscribe("scan/light_sweep", 4, &ModelMatching::onSweep, this);
-    clusters_sub_ = nh.subscribe("clusters", 1, &ModelMatching::onClusters, this);
+    sweep_sub_ = nh.subscribe("scan/light_sweep", kKept, &ModelMatching::onSweep, this);
+    pass_sub_ = nh.subscribe("scan/pass", kKept, &ModelMatching::onPass, this);
+    // a cycle's next pass may come while this one is located: keep it
+    clusters_sub_ = nh.subscribe("clusters", kKept, &ModelMatching::onClusters, this);
     service_ = pnh.advertiseService("locate_objects", &ModelMatching::onLocate, this);
     // the settings file's acceptance thresholds are the starting values of ~ (rqt_reconfigure)
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<cellsight::MatchingAcceptanceConfig>>(reconfigure_mutex_, pnh);
@@ -122,7 +142,26 @@ class ModelMatching {
   void onSweep(const cellsight::LaserSweepConstPtr& msg) {
     std::lock_guard<std::mutex> lock(mutex_);
     sweeps_.push_back(msg);
-    if (sweeps_.size() > 4) sweeps_.erase(sweeps_.begin());
+    if (sweeps_.size() > kKept) sweeps_.erase(sweeps_.begin());
+  }
+
+  /// What the latest scans are for in their cycles, for the clusters that carry the same stamp.
+  void onPass(const cellsight::CyclePassConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pass_infos_.push_back(msg);
+    if (pass_infos_.size() > kKept) pass_infos_.erase(pass_infos_.begin());
+  }
+
+  /// The pass the clusters came from (same stamp); none: a scan on its own, one detect pass.
+  cellsight::CyclePass passInfoFor(const cellsight::ClusterArray& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& p : pass_infos_)
+      if (p->header.stamp == msg.header.stamp) return *p;
+    cellsight::CyclePass own;
+    own.header = msg.header;
+    own.role = cellsight::CyclePass::DETECT;
+    own.last = true;
+    return own;
   }
 
   /// The sweep of the scan the clusters came from (same stamp and frame), or a warning why none.
@@ -151,18 +190,25 @@ class ModelMatching {
   }
 
   void onClusters(const cellsight::ClusterArrayConstPtr& msg) {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      latest_ = msg;
+    const cellsight::CyclePass info = passInfoFor(*msg);
+    const std::string refused = refusal(info);
+    if (!refused.empty()) {
+      ROS_ERROR("model_matching: clusters at %.3f dropped: %s", msg->header.stamp.toSec(), refused.c_str());
+      diag_.dropped("a pass outside its cycle");
+      return;
     }
     cellsight::DetectionArray out;
     std::string why;
     try {
-      if (!locate(*msg, {}, &out, &why)) {
+      std::optional<cellsight::ScanPass> pass = scanPassOf(*msg, &out.warnings, &why);
+      if (!pass) {
         ROS_ERROR("model_matching: clusters at %.3f dropped: %s", msg->header.stamp.toSec(), why.c_str());
         diag_.dropped("no scanner camera transform at the scan's stamp");
         return;
       }
+      pass->role = static_cast<cellsight::PassRole>(info.role);
+      addToCycle(info, std::move(*pass), msg->header);
+      fillDetections(*cycle_, cycle_->located, &out);
       publish(out);
     } catch (const std::exception& e) {  // e.g. a cluster far outside any workspace
       ROS_ERROR("model_matching: clusters at %.3f dropped: they cannot be located: %s (is the scan cropped to the "
@@ -171,14 +217,52 @@ class ModelMatching {
     }
   }
 
+  /// Why this pass cannot join a cycle ("" when it can): a detect pass starts one; a later pass
+  /// needs the open cycle of its id, not yet ended and not full.
+  std::string refusal(const cellsight::CyclePass& info) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (info.role == cellsight::CyclePass::DETECT) return "";
+    const std::string name = "pass " + std::string(cellsight::passRoleName(static_cast<cellsight::PassRole>(info.role))) +
+                             " of cycle '" + info.cycle_id + "'";
+    if (info.role > cellsight::CyclePass::REFINE) return "unknown pass role " + std::to_string(info.role) + " of cycle '" + info.cycle_id + "'";
+    if (!cycle_ || cycle_->id != info.cycle_id || cycle_->id.empty())
+      return name + ": the open cycle is " + (cycle_ ? "'" + cycle_->id + "'" : "none") +
+             " (a cycle starts with its detect pass; was it dropped, or scanned by another client?)";
+    if (cycle_->final) return name + ": that cycle has ended (its last pass came); start a new cycle with a detect pass";
+    if (cycle_->passes.size() >= kMaxPasses) return name + ": a cycle holds at most " + std::to_string(kMaxPasses) + " passes";
+    return "";
+  }
+
+  /// A detect pass starts a cycle; a later pass (refusal() is empty) is located on top of the
+  /// earlier ones. Throws what locating throws, the cycle left as it was.
+  void addToCycle(const cellsight::CyclePass& info, cellsight::ScanPass&& pass, const std_msgs::Header& header) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (info.role == cellsight::CyclePass::DETECT) {
+      cycle_ = std::make_shared<Cycle>();
+      cycle_->id = info.cycle_id;
+    }
+    cycle_->passes.push_back(std::move(pass));
+    cycle_->roles.push_back(info.role);
+    try {
+      cellsight::addPass(*matcher_, cycle_->passes, &cycle_->located);
+    } catch (...) {  // the cycle stays as it was before this pass (none when it was its first)
+      cycle_->passes.pop_back();
+      cycle_->roles.pop_back();
+      if (cycle_->passes.empty()) cycle_.reset();
+      throw;
+    }
+    cycle_->final = info.last || info.cycle_id.empty();
+    cycle_->header = header;
+  }
+
   bool onLocate(cellsight::LocateObjects::Request& req, cellsight::LocateObjects::Response& res) {
-    cellsight::ClusterArrayConstPtr clusters;
+    std::shared_ptr<const Cycle> cycle;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      clusters = latest_;
+      cycle = cycle_;
     }
     using Res = cellsight::LocateObjects::Response;
-    if (!clusters) {
+    if (!cycle) {
       res.status = Res::NO_CLUSTERS;
       res.message = "no clusters received yet on " + clusters_sub_.getTopic() + ": scan first";
       return true;
@@ -192,12 +276,12 @@ class ModelMatching {
         return true;
       }
     }
-    std::string why;
     try {
-      const bool ok = locate(*clusters, req.models, &res.detections, &why);
-      res.status = ok ? Res::OK : Res::NO_TRANSFORM;
-      res.message = ok ? std::to_string(res.detections.detections.size()) + " detections" : why;
-      if (ok) publish(res.detections, req.models);
+      // the latest cycle's passes again, for the models asked
+      fillDetections(*cycle, cellsight::locateScan(*matcher_, cycle->passes, req.models), &res.detections);
+      res.status = Res::OK;
+      res.message = std::to_string(res.detections.detections.size()) + " detections";
+      publish(res.detections, req.models);
     } catch (const std::exception& e) {
       res.status = Res::FAILED;
       res.message = std::string("the latest clusters cannot be located: ") + e.what();
@@ -206,8 +290,10 @@ class ModelMatching {
     return true;
   }
 
-  bool locate(const cellsight::ClusterArray& msg, const std::vector<std::string>& models, cellsight::DetectionArray* out,
-              std::string* why) {
+  /// The clusters as a pass of their scan: the camera from tf at their stamp, the light sheet
+  /// when the illumination test is on; none (with the reason) without the camera's transform.
+  std::optional<cellsight::ScanPass> scanPassOf(const cellsight::ClusterArray& msg, std::vector<std::string>* warnings,
+                                                std::string* why) {
     Eigen::Isometry3d T_frame_camera;
     try {
       T_frame_camera = tf2::transformToEigen(
@@ -215,21 +301,28 @@ class ModelMatching {
     } catch (const tf2::TransformException& e) {
       *why = "no transform " + msg.header.frame_id + " <- " + camera_frame_ + " at the scan's stamp (" + e.what() +
              "); is the calibration published?";
-      return false;
+      return std::nullopt;
     }
-    cellsight::ScanPass pass = cellsight_ros::toScanPass(msg, T_frame_camera.translation().cast<float>(), &out->warnings);
+    cellsight::ScanPass pass = cellsight_ros::toScanPass(msg, T_frame_camera.translation().cast<float>(), warnings);
     if (matcher_->config().check_illumination) {
-      std::unique_ptr<cellsight::LightSweep> light = sweepFor(msg, &out->warnings);
+      std::unique_ptr<cellsight::LightSweep> light = sweepFor(msg, warnings);
       if (light) pass.evidence.light = std::move(*light);
     }
-    const size_t n_clusters = pass.clusters.size();
-    const cellsight::LocatedScan located = cellsight::locateScan(*matcher_, {std::move(pass)}, models);
+    return pass;
+  }
+
+  /// `located` (the cycle's passes) as the message, named against the latest detections
+  /// (a part found again where it was keeps its name).
+  void fillDetections(const Cycle& cycle, const cellsight::LocatedScan& located, cellsight::DetectionArray* out) {
     const cellsight::MatchStats& stats = located.stats;
     const std::vector<cellsight::PartDetection>& dets = located.parts;
-    out->header = msg.header;
-    out->clusters = static_cast<uint32_t>(n_clusters);
-    out->locate_seconds = stats.seconds;
-    diag_.processed(stats.seconds);
+    out->header = cycle.header;
+    out->clusters = static_cast<uint32_t>(cycle.passes.back().clusters.size());
+    out->locate_seconds = located.passes.back().stats.seconds;
+    out->cycle_id = cycle.id;
+    out->passes = cycle.roles;
+    out->final = cycle.final;
+    diag_.processed(out->locate_seconds);
     diag_.set("parts found in the last scan", std::to_string(dets.size()));
     for (const auto& w : stats.warnings) out->warnings.push_back(w);
     // which test refused what each unexplained cluster looked most like (rosconsole debug level)
@@ -255,7 +348,6 @@ class ModelMatching {
                  d.alternative_score_share);
       out->detections.push_back(m);
     }
-    return true;
   }
 
   /// Sends a frame unless tf already has it at that stamp or later (a repeated or older stamp
@@ -371,11 +463,12 @@ class ModelMatching {
   tf2_ros::TransformListener listener_;
   tf2_ros::TransformBroadcaster broadcaster_;
   ros::Publisher detections_pub_, markers_pub_;
-  ros::Subscriber clusters_sub_, sweep_sub_;
+  ros::Subscriber clusters_sub_, sweep_sub_, pass_sub_;
   std::vector<cellsight::LaserSweepConstPtr> sweeps_;  // the latest few, oldest first
+  std::vector<cellsight::CyclePassConstPtr> pass_infos_;  // the same for scan/pass
   ros::ServiceServer service_;
   std::mutex mutex_;
-  cellsight::ClusterArrayConstPtr latest_;
+  std::shared_ptr<Cycle> cycle_;  // the latest cycle's passes (guarded by mutex_; callbacks are serial)
 };
 
 }  // namespace

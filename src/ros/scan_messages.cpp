@@ -92,6 +92,10 @@ nlohmann::json detectionsToJson(const cellsight::DetectionArray& out) {
   j["clusters"] = out.clusters;
   j["locate_seconds"] = out.locate_seconds;
   j["warnings"] = out.warnings;
+  j["cycle_id"] = out.cycle_id;
+  j["passes"] = nlohmann::json::array();
+  for (const uint8_t r : out.passes) j["passes"].push_back(cellsight::passRoleName(static_cast<cellsight::PassRole>(r)));
+  j["final"] = static_cast<bool>(out.final);
   j["detections"] = nlohmann::json::array();
   for (const auto& d : out.detections) {
     const auto& q = d.pose.orientation;

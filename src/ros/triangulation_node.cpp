@@ -1,6 +1,7 @@
 // triangulation: scanner images + the light sheet at their stamps → one profile per frame
 // (scan/profile, base frame) and the accumulated scan. scan/finish applies the statistical
-// outlier filter, the workspace crop and normals, saves PLY/PCD and publishes scan/cloud.
+// outlier filter, the workspace crop and normals, saves PLY/PCD and publishes scan/cloud with
+// scan/light_sweep and scan/pass (the cycle and role the request gives) at its stamp.
 #include <dynamic_reconfigure/server.h>
 #include <image_transport/image_transport.h>
 #include <image_transport/subscriber_filter.h>
@@ -18,6 +19,7 @@
 #include <mutex>
 
 #include "cellsight/FinishScan.h"
+#include "cellsight/CyclePass.h"
 #include "cellsight/common/scan_cloud.hpp"
 #include "cellsight/scanner/scan_pipeline.hpp"
 #include "cellsight_ros/conversions.hpp"
@@ -46,6 +48,7 @@ class Triangulation {
     profile_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/profile", 20);
     cloud_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/cloud", 1, true);
     sweep_pub_ = nh.advertise<cellsight::LaserSweep>("scan/light_sweep", 1, true);
+    pass_pub_ = nh.advertise<cellsight::CyclePass>("scan/pass", 4, true);
     reset_srv_ = nh.advertiseService("scan/reset", &Triangulation::onReset, this);
     finish_srv_ = nh.advertiseService("scan/finish", &Triangulation::onFinish, this);
     // the settings file's thresholds are the starting values of ~ (rqt_reconfigure)
@@ -234,6 +237,13 @@ class Triangulation {
   }
 
   bool onFinish(cellsight::FinishScan::Request& req, cellsight::FinishScan::Response& res) {
+    if (req.role > cellsight::CyclePass::REFINE || (req.role != cellsight::CyclePass::DETECT && req.cycle_id.empty())) {
+      res.status = cellsight::FinishScan::Response::INVALID_REQUEST;
+      res.message = req.role > cellsight::CyclePass::REFINE
+                        ? "unknown pass role " + std::to_string(req.role) + " (cellsight/CyclePass: 0 detect, 1 add_detections, 2 refine)"
+                        : "a later pass (role " + std::to_string(req.role) + ") needs the cycle_id of its detect pass";
+      return true;
+    }
     cellsight::ScanCloud cloud;
     Eigen::Vector3f viewpoint;
     ros::Time stamp;
@@ -274,6 +284,13 @@ class Triangulation {
     cellsight::LightSweep light;
     light.setFanHalfAngle(settings_.laser_fan_angle / 2);
     for (const auto& f : sweep) light.addLaserFrame(f.second);
+    cellsight::CyclePass pass;
+    pass.header = res.cloud.header;
+    pass.cycle_id = req.cycle_id;
+    pass.role = req.role;
+    pass.last = req.last_pass;
+    pass.frames = res.frames;
+    pass_pub_.publish(pass);
     sweep_pub_.publish(cellsight_ros::toLaserSweepMsg(light, base_frame_, stamp));
     cloud_pub_.publish(res.cloud);
     if (!req.output_file.empty()) {
@@ -306,7 +323,7 @@ class Triangulation {
   message_filters::Subscriber<cellsight::LaserPlaneStamped> plane_sub_;
   message_filters::TimeSynchronizer<sensor_msgs::Image, cellsight::LaserPlaneStamped> sync_;
   ros::Subscriber info_sub_;
-  ros::Publisher profile_pub_, cloud_pub_, sweep_pub_;
+  ros::Publisher profile_pub_, cloud_pub_, sweep_pub_, pass_pub_;
   ros::ServiceServer reset_srv_, finish_srv_;
   std::mutex mutex_;
   std::condition_variable cv_;

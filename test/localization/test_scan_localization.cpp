@@ -63,9 +63,19 @@ TEST(ScanLocalization, PassesGiveWhatTheMatcherGivesCalledByHand) {
   const ModelMatcher m(library(), cfg);
   const std::vector<std::string> models{"housing", "bracket"};
 
-  const LocatedScan located = locateScan(
-      m, {pass(PassRole::kDetect, {a}, table_a), pass(PassRole::kAddDetections, {b}, table_b), pass(PassRole::kRefine, {c})},
-      models);
+  const std::vector<ScanPass> passes{pass(PassRole::kDetect, {a}, table_a), pass(PassRole::kAddDetections, {b}, table_b),
+                                     pass(PassRole::kRefine, {c})};
+  const LocatedScan located = locateScan(m, passes, models);
+  // the passes one by one, as the node receives them, give the same after each
+  LocatedScan one_by_one;
+  for (size_t k = 0; k < passes.size(); ++k) {
+    addPass(m, passes, &one_by_one, models);
+    ASSERT_EQ(one_by_one.passes.size(), k + 1);
+    expectSame(one_by_one.passes[k].found, located.passes[k].found);
+  }
+  expectSame(one_by_one.parts, located.parts);
+  EXPECT_EQ(one_by_one.stats.second_pass_added, located.stats.second_pass_added);
+  EXPECT_THROW(addPass(m, passes, &one_by_one, models), std::invalid_argument);  // none left
 
   MatchStats st;
   const auto first = m.locate({a}, models, &st, &kEye, &kTable, &table_a, nullptr, nullptr);
@@ -101,6 +111,9 @@ TEST(ScanLocalization, MalformedPassListsAreRefusedByName) {
   const std::string twice =
       cellsight_test::errorOf([&] { locateScan(m, {pass(PassRole::kDetect, {}), pass(PassRole::kDetect, {})}); });
   EXPECT_NE(twice.find("pass 1 detects again"), std::string::npos) << twice;
+  LocatedScan so_far;
+  const std::string add_alone = cellsight_test::errorOf([&] { addPass(m, {pass(PassRole::kRefine, {})}, &so_far); });
+  EXPECT_NE(add_alone.find("the first pass must detect, not refine"), std::string::npos) << add_alone;
   // an empty first pass is no error: nothing found
   EXPECT_TRUE(locateScan(m, {pass(PassRole::kDetect, {})}).parts.empty());
   EXPECT_THROW(locateScan(m, {pass(PassRole::kDetect, {})}, {"no_such_part"}), std::out_of_range);

@@ -2,7 +2,8 @@
 // (and keeps answering); a cluster holding a single view of a part gives a detection, its tf
 // frame and a correct pose; the scan's light sweep with the clusters' stamp is used, a missing or
 // malformed one is named in the warnings; clusters in a frame with no transform are dropped, the
-// node lives on.
+// node lives on; a cycle's passes are located together, a pass of another cycle or after the
+// cycle's end is dropped.
 #include <gtest/gtest.h>
 
 #include <map>
@@ -16,6 +17,7 @@
 #include <tf2_ros/transform_listener.h>
 
 #include "cellsight/ClusterArray.h"
+#include "cellsight/CyclePass.h"
 #include "cellsight/DetectionArray.h"
 #include "cellsight/LaserSweep.h"
 #include "cellsight/LocateObjects.h"
@@ -158,13 +160,51 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
   clusters.header.stamp = ros::Time::now();
   pub.publish(clusters);
   EXPECT_FALSE(waitForDetections(clusters.header.stamp, 5));
+  // the service locates the latest cycle again: the dropped scan is not in it
   srv.request.models = {};
   ASSERT_TRUE(locate.call(srv));
-  EXPECT_EQ(srv.response.status, cellsight::LocateObjects::Response::NO_TRANSFORM);
-  EXPECT_NE(srv.response.message.find("no transform"), std::string::npos) << srv.response.message;
+  EXPECT_EQ(srv.response.status, cellsight::LocateObjects::Response::OK) << srv.response.message;
+  EXPECT_EQ(srv.response.detections.detections.size(), 1u);
+
+  // a cycle of passes (cellsight/CyclePass on scan/pass, the clusters' stamp): a detect pass, a
+  // pass of another cycle dropped, the refine pass that ends the cycle, a pass after its end dropped
+  clusters.header.frame_id = "base_link";
+  auto pass_pub = nh.advertise<cellsight::CyclePass>("scan/pass", 4, true);
+  auto send_pass = [&](const std::string& cycle, uint8_t role, bool last, uint64_t seed) {
+    clusters.header.stamp = ros::Time::now();
+    clusters.clusters.resize(1);
+    clusters.clusters[0].cloud = cellsight_ros::toCloudMsg(
+        cellsight::singleViewCloud(lib.model("bracket").mesh, truth, Eigen::Vector3f(0.52f, 0.f, 0.62f), 0.001, 2e-5, seed),
+        clusters.header.stamp);
+    clusters.clusters[0].cloud.header.frame_id = "base_link";
+    cellsight::CyclePass p;
+    p.header = clusters.header;
+    p.cycle_id = cycle;
+    p.role = role;
+    p.last = last;
+    pass_pub.publish(p);
+    ros::WallDuration(0.5).sleep();
+    pub.publish(clusters);
+    return waitForDetections(clusters.header.stamp, role == cellsight::CyclePass::DETECT || cycle == "c1" ? 60 : 5);
+  };
+  const auto first = send_pass("c1", cellsight::CyclePass::DETECT, false, 21);
+  ASSERT_TRUE(first) << "no detections for the cycle's detect pass";
+  EXPECT_EQ(first->cycle_id, "c1");
+  EXPECT_EQ(first->passes, std::vector<uint8_t>{cellsight::CyclePass::DETECT});
+  EXPECT_FALSE(first->final);
+  ASSERT_EQ(first->detections.size(), 1u);
+  EXPECT_FALSE(send_pass("c2", cellsight::CyclePass::REFINE, true, 22)) << "a pass of another cycle was located";
+  const auto last = send_pass("c1", cellsight::CyclePass::REFINE, true, 23);
+  ASSERT_TRUE(last) << "no detections for the cycle's refine pass";
+  EXPECT_EQ(last->passes, (std::vector<uint8_t>{cellsight::CyclePass::DETECT, cellsight::CyclePass::REFINE}));
+  EXPECT_TRUE(last->final);
+  ASSERT_EQ(last->detections.size(), 1u);
+  EXPECT_EQ(last->detections[0].name, first->detections[0].name);  // the same part keeps its name
+  EXPECT_FALSE(send_pass("c1", cellsight::CyclePass::ADD_DETECTIONS, false, 24)) << "a pass after the cycle's end was located";
   // diagnostics: the node reports the scans it processed and the one it dropped, with the reason
   std::map<std::string, std::string> kv;
-  for (int tries = 0; tries < 10 && kv["dropped: no scanner camera transform at the scan's stamp"] != "1"; ++tries) {
+  for (int tries = 0; tries < 10 && (kv["dropped: no scanner camera transform at the scan's stamp"] != "1" ||
+                                     kv["dropped: a pass outside its cycle"] != "2"); ++tries) {
     const auto diag = ros::topic::waitForMessage<diagnostic_msgs::DiagnosticArray>("/diagnostics", nh, ros::Duration(3));
     ASSERT_TRUE(diag) << "no /diagnostics";
     for (const auto& st : diag->status) {
@@ -174,6 +214,7 @@ TEST(ModelMatchingNode, ServiceClustersTfAndBadInput) {
     }
   }
   EXPECT_EQ(kv["dropped: no scanner camera transform at the scan's stamp"], "1");
+  EXPECT_EQ(kv["dropped: a pass outside its cycle"], "2");
   ASSERT_FALSE(kv["scans processed"].empty());
   EXPECT_GE(std::stoi(kv["scans processed"]), 5);
 }

@@ -64,4 +64,11 @@ struct LocatedScan {
 LocatedScan locateScan(const ModelMatcher& matcher, const std::vector<ScanPass>& passes,
                        const std::vector<std::string>& models = {});
 
+/// The next pass of a cycle whose passes arrive one by one (the model_matching node): locates
+/// passes[k], k = so_far->passes.size(), on top of *so_far, which holds passes 0..k-1 located.
+/// locateScan is this for k = 0, 1, ..., so both give the same result. Throws as locateScan for a
+/// malformed list, and std::invalid_argument when every pass is located already.
+void addPass(const ModelMatcher& matcher, const std::vector<ScanPass>& passes, LocatedScan* so_far,
+             const std::vector<std::string>& models = {});
+
 }  // namespace cellsight

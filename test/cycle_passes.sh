@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# A cell cycle of three passes through the ROS nodes (the demo's: demo_sweep detect,
+# reverse_sweep add_detections, cross_sweep refine, one cycle id) on the simulated cell, recorded
+# to a bag with its Scan goals; the same bag located in one process (cellsight_locate_bag, the
+# passes split at the recorded goals) must give the live nodes' detections of the cycle: the same
+# passes and roles, parts, names and models, poses within 1e-9 m.
+# Usage: cycle_passes.sh <build folder> <work folder>
+set -uo pipefail
+BUILD=$1
+WORK=$2
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+source "$ROOT/scripts/ros-env.sh" "$BUILD"
+rm -rf "$WORK" && mkdir -p "$WORK/live"
+roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$WORK/live" fixtures:=false \
+  calibration_dir:="$WORK/live/truth/calibration" camera_info_from_calibration:=false \
+  >"$WORK/live_launch.log" 2>&1 &
+LAUNCH_PID=$!
+final() { /usr/bin/python3 -c 'import json,sys; sys.exit(0 if json.load(open(sys.argv[1])).get("final") else 1)' "$1" 2>/dev/null; }
+for _ in $(seq 1500); do  # the cycle's detections after its last pass
+  final "$WORK/live/detections_raw.json" && break
+  kill -0 $LAUNCH_PID 2>/dev/null || break
+  sleep 0.2
+done
+sleep 1
+kill -INT $LAUNCH_PID 2>/dev/null
+wait $LAUNCH_PID 2>/dev/null
+if ! final "$WORK/live/detections_raw.json"; then
+  echo "FAIL: no detections after the cycle's last pass (see $WORK/live_launch.log):"
+  grep -E "scan_client|model_matching.*(ERROR|dropped)" "$WORK/live_launch.log" | tail -5
+  exit 1
+fi
+failed=0
+/usr/bin/python3 - "$WORK/live/detections_raw.json" "$WORK/live/scan_result.json" <<'PY' || failed=1
+import json, sys
+det, scan = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+roles = ["detect", "add_detections", "refine"]
+print("live cycle %s: passes %s, %d parts; scan passes %s" % (det["cycle_id"], det["passes"], len(det["detections"]),
+      [(p["trajectory"], p["frames"]) for p in scan["passes"]]))
+if det["passes"] != roles or not det["cycle_id"] or det["cycle_id"] != scan["cycle_id"]:
+    sys.exit("FAIL: the nodes located passes %s of cycle '%s', expected %s of '%s'" % (det["passes"], det["cycle_id"], roles, scan["cycle_id"]))
+PY
+"$BUILD/devel/lib/cellsight/cellsight_locate_bag" --bag "$WORK/live/raw.bag" --root "$ROOT" --json "$WORK/inprocess_detections.json" \
+  >"$WORK/inprocess.log" 2>&1
+echo "in-process: $(head -1 "$WORK/inprocess.log")"
+if ! /usr/bin/python3 "$ROOT/test/same_detections.py" "$WORK/live/detections_raw.json" "$WORK/inprocess_detections.json" 1e-9; then
+  echo "FAIL: the nodes and the in-process pipeline located the cycle's frames differently"
+  failed=1
+fi
+[ "$failed" -eq 0 ] && echo "passed" || exit 1
