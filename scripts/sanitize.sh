@@ -35,6 +35,11 @@ SLOW_MATCHING+=":ModelMatching.ASecondPassAddsOnlyWhatTheFirstLeftFree"
 # 258 s under the sanitizers; laying a pose into its rest stays covered by
 # APartLyingOnTheTableIsFoundFromItsRests and ARestPoseTiedWithTurnedOnesIsWithinTheQuota
 SLOW_MATCHING+=":ModelMatching.APoseALittleTiltedFromARestIsLaidIntoIt"
+# 85-140 s each beside another shard: the rests stay covered by APartLyingOnTheTableIsFoundFromItsRests,
+# a split part by APartThatClusteringSplitIsPolishedOnBothPieces, the support and overhang
+# refusals by AHolderFittedOntoASmallerBoxIsRefusedForItsOverhang
+SLOW_MATCHING+=":ModelMatching.ARestPoseTiedWithTurnedOnes*:ModelMatching.ARefusedPieceOfASplitPart*"
+SLOW_MATCHING+=":ModelMatching.AHolderSunkIntoTheTable*:ModelMatching.APartFittedOntoALargerObjectsFace*"
 filter() {
   [ "${SANITIZE_ALL:-0}" = 1 ] && return 0
   case $1 in

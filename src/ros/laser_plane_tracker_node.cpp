@@ -22,8 +22,8 @@ namespace {
 class LaserPlaneTracker {
  public:
   LaserPlaneTracker(ros::NodeHandle& nh, ros::NodeHandle& pnh)
-      : diag_(nh, pnh, "laser_plane_tracker", "frames"), listener_(buffer_), info_sub_(nh, "scanner_camera/camera_info", 20),
-        filter_(info_sub_, buffer_, "laser", 50, nh) {
+      : diag_(nh, pnh, "laser_plane_tracker", "frames"), listener_(buffer_), info_sub_(nh, "scanner_camera/camera_info", 60),
+        filter_(info_sub_, buffer_, "laser", 60, nh) {
     cellsight_ros::param(pnh, "laser_frame", laser_frame_);
     double tolerance = 0.0;
     cellsight_ros::param(pnh, "tf_tolerance", tolerance);
@@ -44,7 +44,7 @@ class LaserPlaneTracker {
                                                                                  : "transform unavailable",
                             dropped_.load(), "base_link -> flange");
         });
-    plane_pub_ = nh.advertise<cellsight::LaserPlaneStamped>("scan/laser_plane", 20);
+    plane_pub_ = nh.advertise<cellsight::LaserPlaneStamped>("scan/laser_plane", 60);
   }
 
  private:

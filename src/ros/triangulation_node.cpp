@@ -31,11 +31,15 @@
 
 namespace {
 
+// Frames waiting to be processed: the robot does not wait for the PC (a cycle's next pass scans
+// while the last is located and planned on), so a busy PC must queue a pass's frames, not drop them.
+constexpr uint32_t kFrameQueue = 60;
+
 class Triangulation {
  public:
   Triangulation(ros::NodeHandle& nh, ros::NodeHandle& pnh)
-      : diag_(nh, pnh, "triangulation", "frames"), listener_(buffer_), it_(nh), image_sub_(it_, "scanner_camera/image_raw", 10),
-        plane_sub_(nh, "scan/laser_plane", 10), sync_(image_sub_, plane_sub_, 20) {
+      : diag_(nh, pnh, "triangulation", "frames"), listener_(buffer_), it_(nh), image_sub_(it_, "scanner_camera/image_raw", kFrameQueue),
+        plane_sub_(nh, "scan/laser_plane", kFrameQueue), sync_(image_sub_, plane_sub_, 2 * kFrameQueue) {
     // One strictly validated settings file (config/scanner.yaml): a typo stops the node at start.
     const std::string settings_file = cellsight_ros::requireParam<std::string>(
         pnh, "settings_file", "scanner settings YAML, e.g. $(find cellsight)/config/scanner.yaml");
