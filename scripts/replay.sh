@@ -46,11 +46,13 @@ done
 grep "replay_finisher: scan of" "$LOG" | sed 's/.*replay_finisher: /replay: /'
 if [ -n "$DETECTIONS" ]; then
   # the finished scan goes on through clustering and model_matching
+  # (after the last pass of a cycle: the file is rewritten after every pass)
+  final() { /usr/bin/python3 -c 'import json,sys; sys.exit(0 if json.load(open(sys.argv[1])).get("final") else 1)' "$DETECTIONS" 2>/dev/null; }
   for _ in $(seq 480); do
-    [ -f "$DETECTIONS" ] && break
+    final && break
     kill -0 $LAUNCH_PID 2>/dev/null || break
     sleep 0.25
   done
-  [ -f "$DETECTIONS" ] || { echo "replay: model_matching wrote no detections within 120 s, see $LOG" >&2; exit 1; }
+  final || { echo "replay: model_matching wrote no detections of the bag's last pass within 120 s, see $LOG" >&2; exit 1; }
   grep "model_matching: .* parts located" "$LOG" | tail -1 | sed 's/.*model_matching: /replay: /'
 fi

@@ -3,7 +3,8 @@
 # reverse_sweep add_detections, cross_sweep refine, one cycle id) on the simulated cell, recorded
 # to a bag with its Scan goals; the same bag located in one process (cellsight_locate_bag, the
 # passes split at the recorded goals) must give the live nodes' detections of the cycle: the same
-# passes and roles, parts, names and models, poses within 1e-9 m.
+# passes and roles, parts, names and models, poses within 1e-9 m; and so must the bag replayed
+# through the processing nodes (replay_finisher pausing the player between the passes).
 # Usage: cycle_passes.sh <build folder> <work folder>
 set -uo pipefail
 BUILD=$1
@@ -44,6 +45,16 @@ PY
 echo "in-process: $(head -1 "$WORK/inprocess.log")"
 if ! /usr/bin/python3 "$ROOT/test/same_detections.py" "$WORK/live/detections_raw.json" "$WORK/inprocess_detections.json" 1e-9; then
   echo "FAIL: the nodes and the in-process pipeline located the cycle's frames differently"
+  failed=1
+fi
+export ROS_MASTER_URI="http://127.0.0.1:$(free_port)"
+if bash "$ROOT/scripts/replay.sh" "$BUILD" "$WORK/live/raw.bag" "$WORK/replay.ply" "$WORK/replay_detections.json"; then
+  if ! /usr/bin/python3 "$ROOT/test/same_detections.py" "$WORK/replay_detections.json" "$WORK/inprocess_detections.json" 1e-9; then
+    echo "FAIL: the replayed nodes and the in-process pipeline located the cycle's frames differently"
+    failed=1
+  fi
+else
+  echo "FAIL: the replay of the cycle's bag failed"
   failed=1
 fi
 [ "$failed" -eq 0 ] && echo "passed" || exit 1

@@ -34,4 +34,12 @@ cellsight::ScanPass toScanPass(const cellsight::ClusterArray& msg, const Eigen::
 /// The detections file model_matching writes (~output_file) for one DetectionArray.
 nlohmann::json detectionsToJson(const cellsight::DetectionArray& out);
 
+/// The pass of a recorded cycle a frame stamped `stamp` belongs to: the latest of the Scan goals
+/// sent at `goals_sent` (sorted) at or before it; 0 when none is (a scan on its own).
+size_t passOfFrame(const std::vector<ros::Time>& goals_sent, const ros::Time& stamp);
+
+/// Where pass k of a cycle writes its cloud: `file` for the first, "_pass<k>" before the
+/// extension for a later one (empty stays empty).
+std::string passOutputFile(const std::string& file, size_t k);
+
 }  // namespace cellsight_ros

@@ -81,12 +81,12 @@ std::vector<RecordedPass> passesFromBag(const rosbag::Bag& bag, const Options& o
   std::stable_sort(images.begin(), images.end(), [](const auto& a, const auto& b) { return a->header.stamp < b->header.stamp; });
   std::stable_sort(goals.begin(), goals.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<RecordedPass> passes(std::max<size_t>(goals.size(), 1));
-  for (size_t k = 0; k < goals.size(); ++k) passes[k].goal = goals[k].second;
-  size_t k = 0;
-  for (const auto& image : images) {
-    while (k + 1 < goals.size() && image->header.stamp >= goals[k + 1].first) ++k;
-    passes[k].images.push_back(image);
+  std::vector<ros::Time> sent;
+  for (size_t k = 0; k < goals.size(); ++k) {
+    passes[k].goal = goals[k].second;
+    sent.push_back(goals[k].first);
   }
+  for (const auto& image : images) passes[cellsight_ros::passOfFrame(sent, image->header.stamp)].images.push_back(image);
   return passes;
 }
 

@@ -1,7 +1,10 @@
 // replay_finisher: used by replay.launch. Counts the scanner frames in the bag being played,
 // starts the player (paused until then, ~player) once the processing nodes are subscribed,
 // waits until the triangulation node has processed every frame, finishes the scan into
-// ~output_file and exits (0 on success).
+// ~output_file and exits (0 on success). A bag of a cycle's passes (its recorded /scan/goal) is
+// finished pass by pass with their cycle id and roles, as camera_trigger did: the player is
+// paused after each pass's last frame, the pass finished (later ones into <output>_pass<k>), the
+// scan reset and the player resumed.
 #include <ros/master.h>
 #include <ros/network.h>
 #include <ros/ros.h>
@@ -9,6 +12,7 @@
 #include <xmlrpcpp/XmlRpcException.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
+#include <sensor_msgs/Image.h>
 #include <std_srvs/SetBool.h>
 
 #include <algorithm>
@@ -17,6 +21,9 @@
 #include <string>
 
 #include "cellsight/FinishScan.h"
+#include "cellsight/ScanActionGoal.h"
+#include "cellsight_ros/scan_messages.hpp"
+#include <std_srvs/Trigger.h>
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -68,6 +75,39 @@ std::vector<std::string> unconnectedSubscribers(const std::string& publisher, si
       if (!connected[topic].count(node)) missing.push_back(topic + ": " + node);
     }
   return missing;
+}
+
+/// A pass of the bag's cycle: its goal (none recorded: one pass on its own) and its frames.
+struct BagPass {
+  cellsight::ScanGoal goal;
+  uint32_t frames = 0;
+  ros::Time first, last;  // its frames' stamps
+};
+
+std::vector<BagPass> bagPasses(const std::string& bag_file) {
+  rosbag::Bag bag(bag_file, rosbag::bagmode::Read);
+  std::vector<std::pair<ros::Time, cellsight::ScanGoal>> goals;
+  for (const rosbag::MessageInstance& m : rosbag::View(bag, rosbag::TopicQuery(std::vector<std::string>{"/scan/goal"})))
+    if (const auto g = m.instantiate<cellsight::ScanActionGoal>()) goals.emplace_back(g->header.stamp, g->goal);
+  std::stable_sort(goals.begin(), goals.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<ros::Time> sent;
+  std::vector<BagPass> passes(std::max<size_t>(goals.size(), 1));
+  for (size_t k = 0; k < goals.size(); ++k) {
+    sent.push_back(goals[k].first);
+    passes[k].goal = goals[k].second;
+  }
+  for (const rosbag::MessageInstance& m :
+       rosbag::View(bag, rosbag::TopicQuery(std::vector<std::string>{"/scanner_camera/image_raw"}))) {
+    const auto image = m.instantiate<sensor_msgs::Image>();
+    if (!image) continue;
+    BagPass& p = passes[cellsight_ros::passOfFrame(sent, image->header.stamp)];
+    if (p.frames == 0 || image->header.stamp < p.first) p.first = image->header.stamp;
+    p.last = std::max(p.last, image->header.stamp);
+    ++p.frames;
+  }
+  // a goal with no frame after it (a pass that failed at once) is no pass of the scan
+  passes.erase(std::remove_if(passes.begin(), passes.end(), [](const BagPass& p) { return p.frames == 0; }), passes.end());
+  return passes;
 }
 
 }  // namespace
@@ -135,14 +175,44 @@ int main(int argc, char** argv) {
                "subscribers of its topics (waited %.2f s for them); playback started",
                links, (ros::WallTime::now() - t_connect).toSec());
     }
-    cellsight::FinishScan srv;
-    srv.request.output_file = output;
-    srv.request.expected_frames = frames;
-    srv.request.wait_frames_timeout = duration + 60.0;
-    ROS_INFO("replay_finisher: waiting for %u frames (%.1f s of bag)", frames, duration);
-    if (!finish.call(srv)) throw std::runtime_error("call to scan/finish failed");
-    if (srv.response.status != cellsight::FinishScan::Response::OK) throw std::runtime_error(srv.response.message);
-    ROS_INFO("replay_finisher: %s, written to %s", srv.response.message.c_str(), output.c_str());
+    ros::ServiceClient pause = nh.serviceClient<std_srvs::SetBool>(player + "/pause_playback");
+    ros::ServiceClient reset = nh.serviceClient<std_srvs::Trigger>("scan/reset");
+    const std::vector<BagPass> passes = bagPasses(bag_file);
+    if (passes.size() > 1 && player.empty())
+      throw std::runtime_error(bag_file + " holds " + std::to_string(passes.size()) +
+                               " passes: replaying them needs the player (play:=true) to pause between them");
+    for (size_t k = 0; k < passes.size(); ++k) {
+      const BagPass& p = passes[k];
+      if (k + 1 < passes.size()) {
+        // pause once the bag's clock has passed this pass's last frame, before the next pass's first
+        while (ros::ok() && ros::Time::now() <= p.last) ros::WallDuration(0.005).sleep();
+        std_srvs::SetBool stop;
+        stop.request.data = true;
+        if (!pause.call(stop)) throw std::runtime_error("call to " + pause.getService() + " failed");
+        if (ros::Time::now() >= passes[k + 1].first)
+          throw std::runtime_error("the player ran into pass " + std::to_string(k + 2) +
+                                   " before it could be paused: replay at a lower rate (rate:=0.5)");
+      }
+      cellsight::FinishScan srv;
+      srv.request.output_file = cellsight_ros::passOutputFile(output, k);
+      srv.request.expected_frames = p.frames;
+      srv.request.wait_frames_timeout = duration + 60.0;
+      srv.request.cycle_id = p.goal.cycle_id;
+      srv.request.role = p.goal.role;
+      srv.request.last_pass = p.goal.last_pass;
+      ROS_INFO("replay_finisher: waiting for %u frames of pass %zu/%zu (%.1f s of bag in all)", p.frames, k + 1,
+               passes.size(), duration);
+      if (!finish.call(srv)) throw std::runtime_error("call to scan/finish failed");
+      if (srv.response.status != cellsight::FinishScan::Response::OK) throw std::runtime_error(srv.response.message);
+      ROS_INFO("replay_finisher: %s, written to %s", srv.response.message.c_str(), srv.request.output_file.c_str());
+      if (k + 1 < passes.size()) {
+        std_srvs::Trigger cleared;
+        if (!reset.call(cleared) || !cleared.response.success) throw std::runtime_error("call to scan/reset failed");
+        std_srvs::SetBool go;
+        go.request.data = false;
+        if (!pause.call(go)) throw std::runtime_error("call to " + pause.getService() + " failed");
+      }
+    }
   } catch (const std::exception& e) {
     ROS_ERROR("replay_finisher: %s", e.what());
     return 1;

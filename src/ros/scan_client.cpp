@@ -13,6 +13,7 @@
 #include "cellsight/ScanAction.h"
 #include "cellsight/common/file_io.hpp"
 #include "cellsight_ros/params.hpp"
+#include "cellsight_ros/scan_messages.hpp"
 
 namespace {
 
@@ -39,14 +40,6 @@ std::vector<Pass> parsePasses(const std::string& text) {
   }
   if (out.empty()) throw std::invalid_argument("no pass given");
   return out;
-}
-
-/// `file` with "_pass<k>" before its extension (k > 0): a later pass's cloud
-std::string passFile(const std::string& file, size_t k) {
-  if (file.empty() || k == 0) return file;
-  const size_t dot = file.find_last_of('.'), slash = file.find_last_of('/');
-  const size_t at = dot == std::string::npos || (slash != std::string::npos && dot < slash) ? file.size() : dot;
-  return file.substr(0, at) + "_pass" + std::to_string(k) + file.substr(at);
 }
 
 }  // namespace
@@ -94,7 +87,7 @@ int main(int argc, char** argv) {
     goal.trajectory = passes[k].trajectory;
     goal.continuous = continuous;
     goal.speed_scale = speed_scale;
-    goal.output_file = passFile(output_file, k);
+    goal.output_file = cellsight_ros::passOutputFile(output_file, k);
     goal.cycle_id = cycle_id;
     goal.role = passes[k].role;
     goal.last_pass = k + 1 == passes.size();

@@ -2,6 +2,7 @@
 
 #include <sensor_msgs/image_encodings.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "cellsight_ros/conversions.hpp"
@@ -116,6 +117,18 @@ nlohmann::json detectionsToJson(const cellsight::DetectionArray& out) {
            {"quat", {a.orientation.x, a.orientation.y, a.orientation.z, a.orientation.w}}});
   }
   return j;
+}
+
+size_t passOfFrame(const std::vector<ros::Time>& goals_sent, const ros::Time& stamp) {
+  const auto after = std::upper_bound(goals_sent.begin(), goals_sent.end(), stamp);
+  return after == goals_sent.begin() ? 0 : static_cast<size_t>(after - goals_sent.begin() - 1);
+}
+
+std::string passOutputFile(const std::string& file, size_t k) {
+  if (file.empty() || k == 0) return file;
+  const size_t dot = file.find_last_of('.'), slash = file.find_last_of('/');
+  const size_t at = dot == std::string::npos || (slash != std::string::npos && dot < slash) ? file.size() : dot;
+  return file.substr(0, at) + "_pass" + std::to_string(k) + file.substr(at);
 }
 
 }  // namespace cellsight_ros
