@@ -2,6 +2,7 @@
 #pragma once
 #include <ros/node_handle.h>
 
+#include <cstdlib>
 #include <stdexcept>
 #include <string>
 
@@ -22,6 +23,16 @@ T requireParam(const ros::NodeHandle& nh, const std::string& name, const std::st
 template <typename T>
 void param(const ros::NodeHandle& nh, const std::string& name, T& value) {
   nh.param(name, value, value);
+}
+
+/// `relative` under the user's ROS folder: $ROS_HOME, else $HOME/.ros ("" when neither is set).
+/// Where a node keeps what it writes by default (never the package's own files, never /tmp).
+inline std::string rosHomePath(const std::string& relative) {
+  const char* ros_home = std::getenv("ROS_HOME");
+  const char* home = std::getenv("HOME");
+  if (ros_home && *ros_home) return std::string(ros_home) + "/" + relative;
+  if (home && *home) return std::string(home) + "/.ros/" + relative;
+  return "";
 }
 
 }  // namespace cellsight_ros

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <sstream>
 #include <vector>
 
@@ -12,6 +13,22 @@ BridgeAnswer unavailable(const std::string& why) {
   BridgeAnswer a;
   a.code = "UNAVAILABLE";
   a.message = why;
+  return a;
+}
+
+/// An answer whose user frame the controller may receive: finite and within `max_reach` of the
+/// base; otherwise ERR RANGE, so no value outside the cell ever reaches the robot.
+BridgeAnswer withinReach(BridgeAnswer a, double max_reach) {
+  if (!a.ok) return a;
+  const double d = a.ucs.translation().norm();
+  if (a.ucs.matrix().allFinite() && d <= max_reach) return a;
+  a.ok = false;
+  a.code = "RANGE";
+  std::ostringstream why;
+  why.precision(3);
+  why << "the user frame of " << a.program << " is not sent: it lies " << (std::isfinite(d) ? d : -1.0)
+      << " m from the base (beyond " << max_reach << " m, or not finite): check the fixture registry's ucs";
+  a.message = why.str();
   return a;
 }
 
@@ -164,12 +181,14 @@ void RobotBridge::work() {
     try {
       switch (req.kind) {
         case BridgeRequest::Kind::kAdjust:
-          a = callbacks_.adjust ? callbacks_.adjust() : unavailable("no fixture detection in this cell");
+          a = withinReach(callbacks_.adjust ? callbacks_.adjust() : unavailable("no fixture detection in this cell"),
+                          config_.max_reach);
           reply = a.ok ? "OK ADJUST " + a.fixture + " " + a.type + " " + a.program + " " + formatRobotPose(a.ucs, config_.convention)
                        : "ERR " + a.code + " " + a.message;
           break;
         case BridgeRequest::Kind::kUcs:
-          a = callbacks_.ucs ? callbacks_.ucs(req.name) : unavailable("no fixture detection in this cell");
+          a = withinReach(callbacks_.ucs ? callbacks_.ucs(req.name) : unavailable("no fixture detection in this cell"),
+                          config_.max_reach);
           reply = a.ok ? "OK UCS " + a.program + " " + formatRobotPose(a.ucs, config_.convention) + (a.stale ? " STALE" : " FRESH")
                        : "ERR " + a.code + " " + a.message;
           break;

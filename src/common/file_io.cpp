@@ -16,8 +16,8 @@ namespace cellsight {
 
 namespace {
 
-/// `<path>.tmp.<pid>` files whose writer is gone (killed between create and rename) are removed:
-/// an interrupted write leaves no leftovers after the next write of the same file.
+/// `<path>.tmp.<pid>.<random>` files whose writer is gone (killed between create and rename) are
+/// removed: an interrupted write leaves no leftovers after the next write of the same file.
 void removeStaleTemporaries(const std::string& path) {
   namespace fs = std::filesystem;
   const fs::path target(path);
@@ -27,7 +27,8 @@ void removeStaleTemporaries(const std::string& path) {
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
     if (name.rfind(prefix, 0) != 0) continue;
-    const std::string pid_text = name.substr(prefix.size());
+    const std::string rest = name.substr(prefix.size());
+    const std::string pid_text = rest.substr(0, rest.find('.'));
     if (pid_text.empty() || pid_text.find_first_not_of("0123456789") != std::string::npos) continue;
     const long pid = std::strtol(pid_text.c_str(), nullptr, 10);
     if (pid == ::getpid()) continue;
@@ -40,12 +41,15 @@ void removeStaleTemporaries(const std::string& path) {
 }  // namespace
 
 void writeFileAtomic(const std::string& path, const std::string& content) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  // a new file of a name no one can guess, in the target's folder (mkstemp: O_CREAT | O_EXCL, so
+  // a file or symlink planted there is never opened or followed)
+  std::string tmp = path + ".tmp." + std::to_string(::getpid()) + ".XXXXXX";
+  int fd = ::mkstemp(tmp.data());
   if (fd < 0) {
     throw std::runtime_error(path + ": cannot create temporary file " + tmp + ": " +
                              std::strerror(errno));
   }
+  ::fchmod(fd, 0644);  // mkstemp makes it 0600; the file keeps the usual mode
   size_t done = 0;
   while (done < content.size()) {
     ssize_t n = ::write(fd, content.data() + done, content.size() - done);

@@ -23,15 +23,27 @@ void NodeDiagnostics::processed(double seconds) {
   if (seconds > max_seconds_) max_seconds_ = seconds;
 }
 
+namespace {
+
+// A reason or value may carry a client's text (an object name): bounded in length and in number,
+// so a client sending ever new names cannot grow the node or /diagnostics.
+constexpr size_t kMaxText = 200, kMaxKeys = 32;
+std::string bounded(const std::string& text) { return text.size() <= kMaxText ? text : text.substr(0, kMaxText) + "..."; }
+
+}  // namespace
+
 void NodeDiagnostics::dropped(const std::string& reason) {
   std::lock_guard<std::mutex> lock(mutex_);
   ++dropped_;
-  ++reasons_[reason];
+  const std::string key = bounded(reason);
+  if (reasons_.count(key) || reasons_.size() < kMaxKeys) ++reasons_[key];
+  else ++reasons_["(other reasons)"];
 }
 
 void NodeDiagnostics::set(const std::string& key, const std::string& value) {
   std::lock_guard<std::mutex> lock(mutex_);
-  values_[key] = value;
+  const std::string k = bounded(key);
+  if (values_.count(k) || values_.size() < kMaxKeys) values_[k] = bounded(value);
 }
 
 void NodeDiagnostics::addValue(const std::string& key, std::function<std::string()> fn) {

@@ -82,12 +82,7 @@ class ModelMatching {
     // prepared models are kept on disk (keyed by geometry and settings): a restart loads them
     std::string cache_dir;
     cellsight_ros::param(pnh, "model_cache_dir", cache_dir);
-    if (cache_dir.empty()) {
-      const char* ros_home = std::getenv("ROS_HOME");
-      const char* home = std::getenv("HOME");
-      if (ros_home && *ros_home) cache_dir = std::string(ros_home) + "/cellsight/model_cache";
-      else if (home && *home) cache_dir = std::string(home) + "/.ros/cellsight/model_cache";
-    }
+    if (cache_dir.empty()) cache_dir = cellsight_ros::rosHomePath("cellsight/model_cache");
     if (cache_dir != "none") config_.model_cache_dir = cache_dir;
     // the viewpoint comes per scan from tf; build the per-model data now, not on the first scan
     matcher_ = std::make_unique<cellsight::ModelMatcher>(library_, config_);

@@ -4,7 +4,8 @@
 //        driver's camera_info_url), tf base ← camera optical frame at the image's stamp
 //   out: ~fixtures (cellsight/FixtureArray), tf fixture/<id> and ucs/<program>, ~markers,
 //        ~adjust (AdjustFixtures: detect now), ~teach (TeachFixture: store a program's UCS in
-//        ~teach_file, by default the registry itself, written atomically)
+//        ~teach_file, by default $ROS_HOME/cellsight/fixtures_taught.yaml, checked and written
+//        atomically; a taught file that loads replaces ~registry at start)
 // A fixture not seen in the latest image keeps its last good pose, marked stale. An image
 // without its camera pose in tf is dropped with a log (never read with an identity).
 #include <geometry_msgs/TransformStamped.h>
@@ -20,6 +21,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <map>
+#include <fstream>
 #include <mutex>
 #include <nlohmann/json.hpp>
 
@@ -47,8 +49,20 @@ class QrFrameAdjustment {
       : diag_(nh, pnh, "qr_frame_adjustment", "images"), listener_(buffer_), it_(nh) {
     registry_file_ = cellsight_ros::requireParam<std::string>(pnh, "registry", "the fixture registry, config/fixtures.yaml");
     registry_ = cellsight::loadFixtureRegistry(registry_file_);
-    teach_file_ = registry_file_;
+    // taught user frames go to the user's folder, never into the package's registry; a taught
+    // copy that loads replaces the registry at start, one that does not is named and left out
+    teach_file_ = cellsight_ros::rosHomePath("cellsight/fixtures_taught.yaml");
     cellsight_ros::param(pnh, "teach_file", teach_file_);
+    if (teach_file_.empty()) throw std::runtime_error("~teach_file is not set and neither $ROS_HOME nor $HOME is");
+    if (teach_file_ != registry_file_ && std::ifstream(teach_file_).good()) {
+      try {
+        registry_ = cellsight::loadFixtureRegistry(teach_file_);
+        ROS_INFO("qr_frame_adjustment: the taught registry %s is in use (delete it to start again from %s)",
+                 teach_file_.c_str(), registry_file_.c_str());
+      } catch (const std::exception& e) {
+        ROS_ERROR("qr_frame_adjustment: the taught registry cannot be used, %s is: %s", registry_file_.c_str(), e.what());
+      }
+    }
     std::string camera_file, pose = "table", method = "visp";
     cellsight_ros::param(pnh, "camera_file", camera_file);
     cellsight_ros::param(pnh, "pose", pose);
@@ -138,6 +152,10 @@ class QrFrameAdjustment {
       const auto detections = detector_->detect(img, &cam, expected);
       last_codes_ = static_cast<int>(detections.size());
       result = cellsight::adjustFixtures(detections, registry, cam, T_base_camera, config_);
+      for (const auto& inst : result.fixtures)
+        if (!inst.T_base_fixture.matrix().allFinite() || !inst.T_base_ucs.matrix().allFinite() ||
+            !inst.T_base_ucs_free.matrix().allFinite())
+          throw std::runtime_error("fixture " + inst.id + ": a pose is not finite (check its ucs in the registry)");
     } catch (const std::exception& e) {
       ROS_ERROR_THROTTLE(5, "qr_frame_adjustment: image dropped: %s", e.what());
       diag_.dropped("detection failed");
@@ -296,6 +314,7 @@ class QrFrameAdjustment {
     t->T_fixture_ucs = cellsight_ros::fromPoseMsg(it->second.fixture).inverse() * T_base_ucs;
     t->taught = cellsight::isoDateNow();
     try {
+      cellsight::makeDirs(cellsight::parentDir(teach_file_));
       cellsight::saveFixtureRegistry(teach_file_, next);
     } catch (const std::exception& e) {
       res.message = std::string("cannot write the registry (kept unchanged): ") + e.what();

@@ -45,6 +45,14 @@ class RobotBridgeNode {
     cellsight_ros::param(pnh, "fixtures_topic", fixtures_topic);
     if (port < 0 || port > 65535) throw std::runtime_error("~port must be 0..65535, not " + std::to_string(port));
     if (max_line < 16 || max_line > 65536) throw std::runtime_error("~max_line must be 16..65536");
+    cellsight_ros::param(pnh, "max_reach", c.max_reach);
+    // nonsensical values refuse the start (a negative idle timeout closed every connection)
+    for (const auto& [name, v] : {std::pair<const char*, double>{"line_timeout", c.server.line_timeout},
+                                  {"idle_timeout", c.server.idle_timeout}, {"adjust_timeout", adjust_timeout_},
+                                  {"capture_timeout", capture_timeout_}})
+      if (!(v > 0 && v <= 3600)) throw std::runtime_error(std::string("~") + name + " must lie in (0, 3600] s, not " + std::to_string(v));
+    if (!(c.max_reach > 0 && c.max_reach <= 100)) throw std::runtime_error("~max_reach must lie in (0, 100] m");
+    if (c.server.max_clients < 1 || c.server.max_clients > 1024) throw std::runtime_error("~max_clients must be 1..1024");
     c.server.port = port;
     c.server.max_line = static_cast<size_t>(max_line);
     c.convention = cellsight::parsePoseConvention(convention);

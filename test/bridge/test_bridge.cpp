@@ -2,6 +2,8 @@
 // and malformed clients (garbage, 1 MB lines, slow-loris, disconnects mid-line, 100 connections).
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <atomic>
 #include <chrono>
 #include <memory>
@@ -40,6 +42,13 @@ struct Cell {
     };
     cb.ucs = [](const std::string& program) {
       BridgeAnswer a;
+      if (program == "far_z" || program == "nan_z") {  // a registry or a teach gone wrong
+        a.ok = true;
+        a.program = program;
+        a.ucs = samplePose();
+        a.ucs.translation().x() = program == "far_z" ? 1e300 : std::nan("");
+        return a;
+      }
       if (program != "weld_a") {
         a.code = "UNKNOWN_PROGRAM";
         a.message = "no fixture runs " + program;
@@ -129,6 +138,12 @@ TEST(RobotBridge, AControllerAdjustsAndDrivesAScan) {
   EXPECT_EQ(robot.request("UCS weld_a").substr(0, 13), "OK UCS weld_a");
   EXPECT_NE(robot.request("UCS weld_a").find("STALE"), std::string::npos);
   EXPECT_EQ(robot.request("UCS glue_b").rfind("ERR UNKNOWN_PROGRAM", 0), 0u);
+  // no value outside the cell reaches the controller
+  for (const char* program : {"far_z", "nan_z"}) {
+    const std::string far = robot.request(std::string("UCS ") + program);
+    EXPECT_EQ(far.rfind("ERR RANGE the user frame of " + std::string(program) + " is not sent", 0), 0u) << far;
+    EXPECT_LT(far.size(), 200u) << far;
+  }
   for (int seq = 1; seq <= 5; ++seq) EXPECT_EQ(robot.request("INPOS " + std::to_string(seq)), "OK CAPTURED " + std::to_string(seq));
   // a failed capture: one line, the message's newline flattened
   const std::string failed = robot.request("INPOS 13");

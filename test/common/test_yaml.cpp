@@ -1,4 +1,6 @@
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -104,14 +106,34 @@ TEST(FileIo, AnInterruptedWriteLeavesNoTemporaryBehind) {
   if (child == 0) _exit(0);
   ASSERT_GT(child, 0);
   waitpid(child, nullptr, 0);
-  const std::string stale = dir + "/x.yaml.tmp." + std::to_string(child);
-  const std::string live = dir + "/x.yaml.tmp." + std::to_string(getppid());  // a writer still running
+  const std::string stale = dir + "/x.yaml.tmp." + std::to_string(child) + ".a1B2c3";
+  const std::string live = dir + "/x.yaml.tmp." + std::to_string(getppid()) + ".d4E5f6";  // a writer still running
   cellsight_test::writeText(stale, "half written");
   cellsight_test::writeText(live, "being written");
   cellsight::writeFileAtomic(dir + "/x.yaml", "a: 1\n");
   EXPECT_FALSE(std::ifstream(stale).good()) << "the dead writer's temporary is still there";
   EXPECT_TRUE(std::ifstream(live).good()) << "a running writer's temporary was removed";
   EXPECT_TRUE(std::ifstream(dir + "/x.yaml").good());
+}
+
+// A symlink planted where a writer's temporary would be (the old `<file>.tmp.<pid>`) is never
+// followed: its target stays as it was, the file is written.
+TEST(FileIo, APlantedSymlinkIsNotFollowed) {
+  const std::string dir = cellsight_test::tempDir();
+  const std::string victim = dir + "/victim.txt";
+  cellsight_test::writeText(victim, "keep me");
+  const std::string link = dir + "/x.yaml.tmp." + std::to_string(getpid());
+  ASSERT_EQ(symlink(victim.c_str(), link.c_str()), 0);
+  cellsight::writeFileAtomic(dir + "/x.yaml", "a: 1\n");
+  std::ifstream v(victim);
+  std::string kept((std::istreambuf_iterator<char>(v)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(kept, "keep me");
+  std::ifstream x(dir + "/x.yaml");
+  std::string written((std::istreambuf_iterator<char>(x)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(written, "a: 1\n");
+  struct stat st {};
+  ASSERT_EQ(stat((dir + "/x.yaml").c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0644u);
 }
 
 // Issue 19, class 1: a trajectory's step count is bounded before poses are made.

@@ -91,17 +91,28 @@ TEST(FixturesAndBridge, TheCellAsARobotSeesIt) {
   tr.request.type = "Z";
   ASSERT_TRUE(teach.call(tr));
   EXPECT_FALSE(tr.response.success);
-  std::filesystem::remove("/tmp/cellsight_test_fixtures_taught.yaml");
+  std::string taught_file;  // a new name per run (fixtures_bridge.test): no earlier run's teach is loaded
+  ASSERT_TRUE(nh.getParam("qr_frame_adjustment/teach_file", taught_file));
   Eigen::Isometry3d ucs = truth.front().T_base_fixture * Eigen::Translation3d(0.01, 0.02, 0.0);
   tr.request.type = truth.front().type;
   tr.request.ucs = cellsight_ros::toPoseMsg(ucs);
   ASSERT_TRUE(teach.call(tr));
   EXPECT_TRUE(tr.response.success) << tr.response.message;
-  const cellsight::FixtureRegistry taught = cellsight::loadFixtureRegistry("/tmp/cellsight_test_fixtures_taught.yaml");
+  const cellsight::FixtureRegistry taught = cellsight::loadFixtureRegistry(taught_file);
   const auto* type = std::find_if(taught.fixtures.begin(), taught.fixtures.end(),
                                   [&](const cellsight::FixtureType& f) { return f.type == truth.front().type; }).base();
   EXPECT_LT((type->T_fixture_ucs.translation() - Eigen::Vector3d(0.01, 0.02, 0.0)).norm(), 0.2e-3);
   EXPECT_FALSE(type->taught.empty());
+  // a UCS far outside any cell is refused, the taught file kept; the node goes on detecting
+  tr.request.ucs.position.x = 1e160;
+  ASSERT_TRUE(teach.call(tr));
+  EXPECT_FALSE(tr.response.success);
+  EXPECT_NE(tr.response.message.find("within 2 m of its fixture"), std::string::npos) << tr.response.message;
+  EXPECT_NO_THROW(cellsight::loadFixtureRegistry(taught_file));
+  std::filesystem::remove(taught_file);
+  cellsight::AdjustFixtures after;
+  ASSERT_TRUE(adjust.call(after));
+  EXPECT_EQ(after.response.status, cellsight::AdjustFixtures::Response::OK) << after.response.message;
 
   // the robot over TCP
   int port = 0;

@@ -58,6 +58,8 @@ struct RobotBridgeConfig {
   LineServerConfig server;
   PoseConvention convention = PoseConvention::kKuka;
   int max_errors_in_row = 10;
+  /// m: a user frame farther from the base (or not finite) is never sent: ERR RANGE instead
+  double max_reach = 5.0;
 };
 
 /// The protocol over a LineServer. Blocking answers (ADJUST, INPOS) run on a worker thread, one
