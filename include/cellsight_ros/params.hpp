@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace cellsight_ros {
 
@@ -34,5 +35,10 @@ inline std::string rosHomePath(const std::string& relative) {
   if (home && *home) return std::string(home) + "/.ros/" + relative;
   return "";
 }
+
+/// Why `name` cannot be a file a request asks a node to write ("" when it can, and for ""): a
+/// plain name (letters, digits, '.', '_', '-'; not starting with '.'; at most 128 characters)
+/// ending in one of `extensions`. Requests name files; the node's folder parameter says where.
+std::string outputNameProblem(const std::string& name, const std::vector<std::string>& extensions);
 
 }  // namespace cellsight_ros

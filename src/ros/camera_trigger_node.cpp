@@ -156,6 +156,11 @@ class CameraTrigger {
                            : "a later pass (role " + std::to_string(goal.role) + ") needs the cycle_id of its detect pass";
       return;
     }
+    if (const std::string why = cellsight_ros::outputNameProblem(goal.output_file, {".ply", ".pcd"}); !why.empty()) {
+      result.status = ScanResult::INVALID_GOAL;
+      result.message = "output_file: " + why + " (triangulation writes it into its ~output_dir)";
+      return;
+    }
     if (!std::isfinite(goal.speed_scale) || goal.speed_scale < 0 || goal.speed_scale > 1) {
       result.status = ScanResult::INVALID_GOAL;
       result.message = "speed_scale must lie in [0, 1] (0: the default 0.1), got " + std::to_string(goal.speed_scale);
@@ -216,7 +221,7 @@ class CameraTrigger {
       }
       result.points = fin.response.points;
       result.cloud = fin.response.cloud;
-      result.output_file = goal.output_file;
+      result.output_file = fin.response.output_path;
     }
     result.status = ScanResult::OK;
     result.message = "'" + name + "': " + std::to_string(captured) + " frames, " +

@@ -14,6 +14,7 @@
 #include <rosbag/view.h>
 #include <sensor_msgs/Image.h>
 #include <std_srvs/SetBool.h>
+#include <std_srvs/Trigger.h>
 
 #include <algorithm>
 #include <map>
@@ -22,8 +23,9 @@
 
 #include "cellsight/FinishScan.h"
 #include "cellsight/ScanActionGoal.h"
+#include "cellsight/common/scan_cloud.hpp"
+#include "cellsight_ros/conversions.hpp"
 #include "cellsight_ros/scan_messages.hpp"
-#include <std_srvs/Trigger.h>
 #include "cellsight_ros/params.hpp"
 
 namespace {
@@ -194,7 +196,7 @@ int main(int argc, char** argv) {
                                    " before it could be paused: replay at a lower rate (rate:=0.5)");
       }
       cellsight::FinishScan srv;
-      srv.request.output_file = cellsight_ros::passOutputFile(output, k);
+      // the finisher writes the cloud itself: triangulation writes only into its own folder
       srv.request.expected_frames = p.frames;
       srv.request.wait_frames_timeout = duration + 60.0;
       srv.request.cycle_id = p.goal.cycle_id;
@@ -204,7 +206,9 @@ int main(int argc, char** argv) {
                passes.size(), duration);
       if (!finish.call(srv)) throw std::runtime_error("call to scan/finish failed");
       if (srv.response.status != cellsight::FinishScan::Response::OK) throw std::runtime_error(srv.response.message);
-      ROS_INFO("replay_finisher: %s, written to %s", srv.response.message.c_str(), srv.request.output_file.c_str());
+      const std::string file = cellsight_ros::passOutputFile(output, k);
+      cellsight::saveCloud(file, cellsight_ros::fromCloudMsg(srv.response.cloud));
+      ROS_INFO("replay_finisher: %s, written to %s", srv.response.message.c_str(), file.c_str());
       if (k + 1 < passes.size()) {
         std_srvs::Trigger cleared;
         if (!reset.call(cleared) || !cleared.response.success) throw std::runtime_error("call to scan/reset failed");

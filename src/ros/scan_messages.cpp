@@ -3,9 +3,11 @@
 #include <sensor_msgs/image_encodings.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 
 #include "cellsight_ros/conversions.hpp"
+#include "cellsight_ros/params.hpp"
 
 namespace cellsight_ros {
 
@@ -129,6 +131,19 @@ std::string passOutputFile(const std::string& file, size_t k) {
   const size_t dot = file.find_last_of('.'), slash = file.find_last_of('/');
   const size_t at = dot == std::string::npos || (slash != std::string::npos && dot < slash) ? file.size() : dot;
   return file.substr(0, at) + "_pass" + std::to_string(k) + file.substr(at);
+}
+
+std::string outputNameProblem(const std::string& name, const std::vector<std::string>& extensions) {
+  if (name.empty()) return "";
+  const bool plain = name.size() <= 128 && name[0] != '.' && std::all_of(name.begin(), name.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-';
+  });
+  if (!plain) return "'" + name.substr(0, 128) + "' is not a plain file name (letters, digits, '.', '_', '-'; no '/', not hidden)";
+  for (const auto& e : extensions)
+    if (name.size() > e.size() && name.compare(name.size() - e.size(), e.size(), e) == 0) return "";
+  std::string list;
+  for (const auto& e : extensions) list += (list.empty() ? "" : ", ") + e;
+  return "'" + name + "' must end in " + list;
 }
 
 }  // namespace cellsight_ros

@@ -26,6 +26,7 @@
 #include "cellsight_ros/node.hpp"
 #include "cellsight/ScannerLineConfig.h"
 #include "cellsight_ros/diagnostics.hpp"
+#include "cellsight/common/file_io.hpp"
 #include "cellsight_ros/params.hpp"
 #include "cellsight_ros/scan_messages.hpp"
 
@@ -47,6 +48,9 @@ class Triangulation {
     line_ = settings_.line;
     cellsight_ros::param(pnh, "base_frame", base_frame_);
     cellsight_ros::param(pnh, "laser_frame", laser_frame_);
+    // scan/finish writes only here: a request names a file, never a path
+    cellsight_ros::param(pnh, "output_dir", output_dir_);
+    if (output_dir_.empty()) output_dir_ = cellsight_ros::rosHomePath("cellsight/scans");
     info_sub_ = nh.subscribe("scanner_camera/camera_info", 5, &Triangulation::onInfo, this);
     sync_.registerCallback(&Triangulation::onFrame, this);
     profile_pub_ = nh.advertise<sensor_msgs::PointCloud2>("scan/profile", 20);
@@ -248,6 +252,12 @@ class Triangulation {
                         : "a later pass (role " + std::to_string(req.role) + ") needs the cycle_id of its detect pass";
       return true;
     }
+    const std::string name_problem = cellsight_ros::outputNameProblem(req.output_file, {".ply", ".pcd"});
+    if (!name_problem.empty()) {
+      res.status = cellsight::FinishScan::Response::INVALID_REQUEST;
+      res.message = "output_file: " + name_problem + " (it is written into ~output_dir, " + output_dir_ + ")";
+      return true;
+    }
     cellsight::ScanCloud cloud;
     Eigen::Vector3f viewpoint;
     ros::Time stamp;
@@ -299,7 +309,9 @@ class Triangulation {
     cloud_pub_.publish(res.cloud);
     if (!req.output_file.empty()) {
       try {
-        cellsight::saveCloud(req.output_file, cloud);
+        res.output_path = output_dir_ + "/" + req.output_file;
+        cellsight::makeDirs(output_dir_);
+        cellsight::saveCloud(res.output_path, cloud);
       } catch (const std::exception& e) {
         res.status = cellsight::FinishScan::Response::SAVE_FAILED;
         res.message = e.what();
@@ -309,7 +321,7 @@ class Triangulation {
     res.status = cellsight::FinishScan::Response::OK;
     res.message = "scan of " + std::to_string(res.points) + " points from " + std::to_string(res.frames) + " frames";
     ROS_INFO("triangulation: %s%s%s", res.message.c_str(), req.output_file.empty() ? "" : ", saved to ",
-             req.output_file.c_str());
+             res.output_path.c_str());
     return true;
   }
 
@@ -319,6 +331,7 @@ class Triangulation {
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<cellsight::ScannerLineConfig>> reconfigure_;
   std::string base_frame_ = "base_link";
+  std::string output_dir_;  // where scan/finish saves clouds
   std::string laser_frame_ = "laser";
   tf2_ros::Buffer buffer_;
   tf2_ros::TransformListener listener_;

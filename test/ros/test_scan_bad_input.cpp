@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "cellsight/MoveFlange.h"
+#include "cellsight/CyclePass.h"
 #include "cellsight/ScanAction.h"
 
 namespace {
@@ -42,6 +43,38 @@ TEST(ScanBadInput, NanSpeedScaleIsRefused) {
   ASSERT_TRUE(client.waitForResult(ros::Duration(20)));
   EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::INVALID_GOAL);
   EXPECT_NE(client.getResult()->message.find("speed_scale"), std::string::npos) << client.getResult()->message;
+}
+
+// Requests name files, not paths: a path, a hidden name or another extension is refused before
+// the robot moves; so is a later pass without its cycle or an unknown role.
+TEST(ScanBadInput, OutputPathsAndPassesThatCannotBeAreRefused) {
+  actionlib::SimpleActionClient<cellsight::ScanAction> client("scan", true);
+  ASSERT_TRUE(client.waitForServer(ros::Duration(30)));
+  const std::vector<std::pair<std::string, std::string>> bad{
+      {"../outside.ply", "not a plain file name"}, {"/etc/cron.d/x.ply", "not a plain file name"},
+      {".hidden.ply", "not a plain file name"}, {"scan.yaml", "must end in .ply, .pcd"}};
+  for (const auto& [file, why] : bad) {
+    cellsight::ScanGoal goal;
+    goal.trajectory = "quick_sweep";
+    goal.output_file = file;
+    client.sendGoal(goal);
+    ASSERT_TRUE(client.waitForResult(ros::Duration(20)));
+    EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::INVALID_GOAL) << file;
+    EXPECT_NE(client.getResult()->message.find(why), std::string::npos) << client.getResult()->message;
+  }
+  cellsight::ScanGoal later;
+  later.trajectory = "quick_sweep";
+  later.role = cellsight::CyclePass::REFINE;
+  client.sendGoal(later);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20)));
+  EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::INVALID_GOAL);
+  EXPECT_NE(client.getResult()->message.find("needs the cycle_id"), std::string::npos) << client.getResult()->message;
+  later.cycle_id = "c";
+  later.role = 7;
+  client.sendGoal(later);
+  ASSERT_TRUE(client.waitForResult(ros::Duration(20)));
+  EXPECT_EQ(client.getResult()->status, cellsight::ScanResult::INVALID_GOAL);
+  EXPECT_NE(client.getResult()->message.find("unknown role 7"), std::string::npos) << client.getResult()->message;
 }
 
 TEST(ScanBadInput, RobotThatNeverArrivesAbortsWithAClearStatus) {
