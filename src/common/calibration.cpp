@@ -12,8 +12,10 @@
 
 namespace cellsight {
 
-TransformCalibration loadTransformCalibration(const std::string& path) {
-  YamlMap m(loadYamlFile(path), path);
+namespace {
+
+TransformCalibration parseTransformCalibration(const YAML::Node& root, const std::string& path) {
+  YamlMap m(root, path);
   TransformCalibration c;
   c.parent_frame = m.getString("parent_frame");
   c.child_frame = m.getString("child_frame");
@@ -29,6 +31,12 @@ TransformCalibration loadTransformCalibration(const std::string& path) {
   c.date = m.getString("date", "");
   m.finish();
   return c;
+}
+
+}  // namespace
+
+TransformCalibration loadTransformCalibration(const std::string& path) {
+  return parseTransformCalibration(loadYamlFile(path), path);
 }
 
 std::string transformCalibrationYaml(const TransformCalibration& c) {
@@ -48,7 +56,9 @@ std::string transformCalibrationYaml(const TransformCalibration& c) {
 }
 
 void saveTransformCalibration(const std::string& path, const TransformCalibration& cal) {
-  writeFileAtomic(path, transformCalibrationYaml(cal));
+  const std::string text = transformCalibrationYaml(cal);
+  parseTransformCalibration(YAML::Load(text), path);  // what its loader would refuse is never written
+  writeFileAtomic(path, text);
 }
 
 CalibrationSet loadCalibrationFolder(const std::string& folder) {

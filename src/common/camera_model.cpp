@@ -80,8 +80,10 @@ std::vector<double> matrixData(const YamlMap& m, const std::string& key, int row
 }
 }  // namespace
 
-CameraIntrinsics loadCameraInfoYaml(const std::string& path) {
-  YamlMap m(loadYamlFile(path), path);
+namespace {
+
+CameraIntrinsics parseCameraInfoYaml(const YAML::Node& root, const std::string& path) {
+  YamlMap m(root, path);
   CameraIntrinsics cam;
   cam.camera_name = m.getString("camera_name", "camera");
   cam.width = m.getInt("image_width");
@@ -109,11 +111,17 @@ CameraIntrinsics loadCameraInfoYaml(const std::string& path) {
   return cam;
 }
 
+}  // namespace
+
+CameraIntrinsics loadCameraInfoYaml(const std::string& path) { return parseCameraInfoYaml(loadYamlFile(path), path); }
+
 std::string cameraInfoYaml(const CameraIntrinsics& c) {
+  YAML::Emitter name;  // quoted where YAML needs it: a name never becomes structure
+  name << c.camera_name;
   std::ostringstream s;
   s << std::setprecision(17);
   s << "image_width: " << c.width << "\nimage_height: " << c.height
-    << "\ncamera_name: " << c.camera_name << "\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: ["
+    << "\ncamera_name: " << name.c_str() << "\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: ["
     << c.fx << ", 0, " << c.cx << ", 0, " << c.fy << ", " << c.cy << ", 0, 0, 1]\n"
     << "distortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n  data: ["
     << c.dist[0] << ", " << c.dist[1] << ", " << c.dist[2] << ", " << c.dist[3] << ", "
@@ -125,7 +133,9 @@ std::string cameraInfoYaml(const CameraIntrinsics& c) {
 }
 
 void saveCameraInfoYaml(const std::string& path, const CameraIntrinsics& cam) {
-  writeFileAtomic(path, cameraInfoYaml(cam));
+  const std::string text = cameraInfoYaml(cam);
+  parseCameraInfoYaml(YAML::Load(text), path);  // what its loader would refuse is never written
+  writeFileAtomic(path, text);
 }
 
 }  // namespace cellsight

@@ -9,6 +9,7 @@
 #include <std_srvs/Trigger.h>
 #include <tf2_eigen/tf2_eigen.h>
 
+#include <cctype>
 #include <opencv2/imgproc.hpp>
 
 #include "cellsight/CalibrateExtrinsics.h"
@@ -60,10 +61,27 @@ class ScannerCalibration {
   }
 
   static cellsight::ChessboardSpec board(int cols, int rows, double square) {
-    if (cols < 2 || rows < 2 || !(square > 0)) {
-      throw std::invalid_argument("board needs >= 2x2 inner corners and a square size > 0 (metres)");
+    if (cols < 2 || rows < 2 || cols > 200 || rows > 200 || !(square >= 1e-4 && square <= 1.0)) {
+      throw std::invalid_argument("board needs 2x2 to 200x200 inner corners and a square size of 0.1 mm to 1 m (metres), "
+                                  "got " + std::to_string(cols) + "x" + std::to_string(rows) + ", " + std::to_string(square));
     }
     return {{cols, rows}, square};
+  }
+
+  /// A camera or frame name from a request as the file name and YAML it becomes: ROS naming
+  /// (letters, digits, '_', '/'-separated, each part starting with a letter; no leading '/'),
+  /// at most 64 characters; throws naming `what` otherwise.
+  static const std::string& checkedName(const std::string& what, const std::string& name) {
+    bool ok = !name.empty() && name.size() <= 64 && name.front() != '/' && name.back() != '/';
+    for (size_t i = 0; ok && i < name.size(); ++i) {
+      const char c = name[i];
+      const bool starts = i == 0 || name[i - 1] == '/';
+      ok = starts ? std::isalpha(static_cast<unsigned char>(c)) : (std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '/');
+    }
+    if (!ok)
+      throw std::invalid_argument(what + " '" + name.substr(0, 64) +
+                                  "' is not a ROS name (letters, digits, '_', '/'-separated parts starting with a letter)");
+    return name;
   }
 
   /// The request's image as 8-bit grey (mono8 as it is; rgb8/bgr8 converted); throws naming it.
@@ -117,16 +135,18 @@ class ScannerCalibration {
 
   bool onIntrinsics(cellsight::CalibrateIntrinsics::Request& req, cellsight::CalibrateIntrinsics::Response& res) {
     return guarded(res, [&] {
+      const std::string camera_name = req.camera_name.empty() ? "scanner_camera" : checkedName("camera_name", req.camera_name);
+      const cellsight::ChessboardSpec spec = board(req.board_cols, req.board_rows, req.square_size);
       if (req.images.empty()) throw std::invalid_argument("no images in the request");
       std::vector<std::pair<std::string, cv::Mat>> views;
       for (size_t i = 0; i < req.images.size(); ++i) {
         const std::string name = "image " + std::to_string(i);
         views.emplace_back(name, grey(req.images[i], name));
       }
-      auto r = cellsight::calibrateIntrinsics(views, board(req.board_cols, req.board_rows, req.square_size),
+      auto r = cellsight::calibrateIntrinsics(views, spec,
                                               cellsight::parseDistortionModel(req.model.empty() ? "full" : req.model),
                                               req.fix_aspect_ratio);
-      r.camera.camera_name = req.camera_name.empty() ? "scanner_camera" : req.camera_name;
+      r.camera.camera_name = camera_name;
       res.file = fileFor(r.camera.camera_name);
       if (!res.file.empty()) cellsight::saveCameraInfoYaml(res.file, r.camera);
       res.camera_info = cellsight_ros::toCameraInfo(r.camera, req.images.front().header.frame_id, ros::Time::now());
@@ -146,6 +166,12 @@ class ScannerCalibration {
 
   bool onExtrinsics(cellsight::CalibrateExtrinsics::Request& req, cellsight::CalibrateExtrinsics::Response& res) {
     return guarded(res, [&] {
+      cellsight::TransformCalibration c;
+      c.parent_frame = checkedName("parent_frame", req.parent_frame.empty() ? "base_link" : req.parent_frame);
+      c.child_frame = checkedName("child_frame", !req.child_frame.empty()               ? req.child_frame
+                                                 : !req.camera_info.header.frame_id.empty() ? req.camera_info.header.frame_id
+                                                                                            : "scanner_camera_optical");
+      if (c.child_frame == c.parent_frame) throw std::invalid_argument("child_frame and parent_frame are both '" + c.child_frame + "'");
       const cellsight::CameraIntrinsics cam = cellsight_ros::fromCameraInfo(req.camera_info);
       auto p = [](const geometry_msgs::Point& q) { return Eigen::Vector3d(q.x, q.y, q.z); };
       for (const auto* q : {&req.origin, &req.on_x, &req.in_xy})
@@ -153,11 +179,6 @@ class ScannerCalibration {
       const auto r = cellsight::calibrateExtrinsics(grey(req.image, "image"),
                                                     board(req.board_cols, req.board_rows, req.square_size), cam,
                                                     cellsight::frameFromThreePoints(p(req.origin), p(req.on_x), p(req.in_xy)));
-      cellsight::TransformCalibration c;
-      c.parent_frame = req.parent_frame.empty() ? "base_link" : req.parent_frame;
-      c.child_frame = !req.child_frame.empty()               ? req.child_frame
-                      : !req.camera_info.header.frame_id.empty() ? req.camera_info.header.frame_id
-                                                                 : "scanner_camera_optical";
       c.T_parent_child = r.T_base_camera;
       c.residual_rms = r.rms_px;
       c.method = "pattern PnP + taught pattern frame (residual: reprojection RMS px)";
@@ -173,6 +194,10 @@ class ScannerCalibration {
 
   bool onLaser(cellsight::CalibrateLaser::Request& req, cellsight::CalibrateLaser::Response& res) {
     return guarded(res, [&] {
+      cellsight::TransformCalibration c;
+      c.parent_frame = checkedName("flange_frame", req.flange_frame.empty() ? "flange" : req.flange_frame);
+      c.child_frame = checkedName("laser_frame", req.laser_frame.empty() ? "laser" : req.laser_frame);
+      if (c.child_frame == c.parent_frame) throw std::invalid_argument("laser_frame and flange_frame are both '" + c.child_frame + "'");
       const size_t n = req.images.size();
       if (n == 0) throw std::invalid_argument("no observations in the request");
       if (req.flange_poses.size() != n || req.plane_z.size() != n || (!req.block_z.empty() && req.block_z.size() != n)) {
@@ -201,9 +226,6 @@ class ScannerCalibration {
       } else {
         throw std::invalid_argument("method must be lsq or three_point");
       }
-      cellsight::TransformCalibration c;
-      c.parent_frame = req.flange_frame.empty() ? "flange" : req.flange_frame;
-      c.child_frame = req.laser_frame.empty() ? "laser" : req.laser_frame;
       c.T_parent_child = r.T_flange_laser;
       c.residual_rms = r.rms_m;
       c.method = method + " light-sheet calibration (residual: m)";

@@ -34,6 +34,16 @@ TEST(Camera, CameraInfoYamlRoundTripAndErrors) {
   EXPECT_EQ(b.width, 1920);
   EXPECT_DOUBLE_EQ(b.fy, 2390);
   EXPECT_DOUBLE_EQ(b.dist[4], 0.01);
+  // a name YAML would read as structure is written quoted and read back as it was
+  CameraIntrinsics odd = c;
+  odd.camera_name = "a: [b";
+  cellsight::saveCameraInfoYaml(dir + "/odd.yaml", odd);
+  EXPECT_EQ(cellsight::loadCameraInfoYaml(dir + "/odd.yaml").camera_name, "a: [b");
+  // intrinsics its loader would refuse are never written; the old file stays
+  CameraIntrinsics zero = c;
+  zero.fx = 0;
+  EXPECT_THROW(cellsight::saveCameraInfoYaml(dir + "/c.yaml", zero), cellsight::ConfigError);
+  EXPECT_DOUBLE_EQ(cellsight::loadCameraInfoYaml(dir + "/c.yaml").fx, 2400);
   cellsight_test::writeText(dir + "/bad.yaml",
                             "image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, "
                             "data: [0, 0, 320, 0, 500, 240, 0, 0, 1]}\ndistortion_model: plumb_bob\n"

@@ -2,6 +2,8 @@
 // chessboard images give intrinsics (in the response and in ~calibration_dir); bad requests are
 // refused with a status and a message naming the cause, and the previous file stays untouched.
 #include <gtest/gtest.h>
+
+#include <tuple>
 #include <ros/package.h>
 #include <ros/ros.h>
 
@@ -116,7 +118,37 @@ TEST(CalibrationServices, BadRequestsAreRefusedAndThePreviousFileStays) {
   EXPECT_EQ(l.response.status, cellsight::CalibrateLaser::Response::FAILED);
   EXPECT_NE(l.response.message.find("one entry per observation"), std::string::npos) << l.response.message;
 
+  // names become file names and YAML: only ROS names; sizes within a board's
+  cellsight::CalibrateIntrinsics named = odd;
+  named.request.camera_name = "a: [b";
+  ASSERT_TRUE(intrinsics.call(named));
+  EXPECT_EQ(named.response.status, cellsight::CalibrateIntrinsics::Response::FAILED);
+  EXPECT_NE(named.response.message.find("is not a ROS name"), std::string::npos) << named.response.message;
+  named.request.camera_name = ".._escape";
+  ASSERT_TRUE(intrinsics.call(named));
+  EXPECT_NE(named.response.message.find("is not a ROS name"), std::string::npos) << named.response.message;
+  named.request.camera_name = "test_camera";
+  named.request.square_size = 1e-300;
+  ASSERT_TRUE(intrinsics.call(named));
+  EXPECT_NE(named.response.message.find("square size"), std::string::npos) << named.response.message;
+  ext.request.in_xy.y = 0.1;
+  for (const auto& [parent, child, why] : {std::tuple<std::string, std::string, std::string>{"base_link", "/abs_frame", "is not a ROS name"},
+                                           {"base_link", "base_link", "are both 'base_link'"}}) {
+    ext.request.parent_frame = parent;
+    ext.request.child_frame = child;
+    ASSERT_TRUE(extrinsics.call(ext));
+    EXPECT_EQ(ext.response.status, cellsight::CalibrateExtrinsics::Response::FAILED);
+    EXPECT_NE(ext.response.message.find(why), std::string::npos) << ext.response.message;
+  }
+  l.request.laser_frame = "flange";
+  ASSERT_TRUE(laser.call(l));
+  EXPECT_NE(l.response.message.find("are both 'flange'"), std::string::npos) << l.response.message;
+
   for (const auto& f : {cam_file, laser_file, pose_file}) EXPECT_EQ(slurp(f), "previous: calibration\n") << f;
+  for (const auto& f : std::filesystem::directory_iterator(dir))  // nothing else (the other test writes test_camera.yaml)
+    EXPECT_TRUE(f.path() == cam_file || f.path() == laser_file || f.path() == pose_file ||
+                f.path().filename() == "test_camera.yaml")
+        << f.path();
 }
 
 int main(int argc, char** argv) {

@@ -18,6 +18,8 @@ struct TransformCalibration {
 
 TransformCalibration loadTransformCalibration(const std::string& path);
 std::string transformCalibrationYaml(const TransformCalibration& cal);
+/// Writes atomically after checking the text as loadTransformCalibration would: one it would
+/// refuse (e.g. a child frame equal to its parent) throws ConfigError, the old file kept.
 void saveTransformCalibration(const std::string& path, const TransformCalibration& cal);
 
 /// What a calibration folder holds: every *.yaml is either a transform (has `parent_frame`)

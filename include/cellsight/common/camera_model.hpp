@@ -36,7 +36,7 @@ struct CameraIntrinsics {
 CameraIntrinsics loadCameraInfoYaml(const std::string& path);
 /// Serialises to the ROS camera_info YAML format.
 std::string cameraInfoYaml(const CameraIntrinsics& cam);
-/// Writes the camera_info YAML atomically.
+/// Writes the camera_info YAML atomically, after checking it as loadCameraInfoYaml would.
 void saveCameraInfoYaml(const std::string& path, const CameraIntrinsics& cam);
 
 }  // namespace cellsight
