@@ -10,6 +10,7 @@
 // without its camera pose in tf is dropped with a log (never read with an identity).
 #include <geometry_msgs/TransformStamped.h>
 #include <image_transport/image_transport.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -46,7 +47,7 @@ nlohmann::json poseJson(const Eigen::Isometry3d& T) {
 class QrFrameAdjustment {
  public:
   QrFrameAdjustment(ros::NodeHandle& nh, ros::NodeHandle& pnh)
-      : diag_(nh, pnh, "qr_frame_adjustment", "images"), listener_(buffer_), it_(nh) {
+      : diag_(nh, pnh, "qr_frame_adjustment", "images"), listener_(buffer_) {
     registry_file_ = cellsight_ros::requireParam<std::string>(pnh, "registry", "the fixture registry, config/fixtures.yaml");
     registry_ = cellsight::loadFixtureRegistry(registry_file_);
     // taught user frames go to the user's folder, never into the package's registry; a taught
@@ -86,12 +87,24 @@ class QrFrameAdjustment {
     detector_ = std::make_unique<cellsight::QrDetector>(dc);
     fixtures_pub_ = pnh.advertise<cellsight::FixtureArray>("fixtures", 1, true);
     markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", 1, true);
-    image_sub_ = it_.subscribeCamera("fixture_camera/image_raw", 1, &QrFrameAdjustment::onImage, this);
+    // images on a queue and thread of their own: requests waiting for an image never hold the
+    // thread that would process it
+    image_nh_ = nh;
+    image_nh_.setCallbackQueue(&image_queue_);
+    image_it_ = std::make_unique<image_transport::ImageTransport>(image_nh_);
+    image_sub_ = image_it_->subscribeCamera("fixture_camera/image_raw", 1, &QrFrameAdjustment::onImage, this);
+    image_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &image_queue_);
+    image_spinner_->start();
     adjust_srv_ = pnh.advertiseService("adjust", &QrFrameAdjustment::onAdjust, this);
     teach_srv_ = pnh.advertiseService("teach", &QrFrameAdjustment::onTeach, this);
     frame_timer_ = nh.createTimer(ros::Duration(0.5), [this](const ros::TimerEvent&) { republish(); });
     ROS_INFO("qr_frame_adjustment: %zu fixture types from %s, %s pose, intrinsics from %s", registry_.fixtures.size(),
              registry_file_.c_str(), pose.c_str(), camera_from_file_ ? camera_file.c_str() : "camera_info");
+  }
+
+  ~QrFrameAdjustment() {  // the image thread and subscription go before the queue they use
+    if (image_spinner_) image_spinner_->stop();
+    image_sub_.shutdown();
   }
 
  private:
@@ -275,8 +288,18 @@ class QrFrameAdjustment {
     // table before the fixture was put down
     const ros::Time asked = ros::Time::now();
     std::unique_lock<std::mutex> lock(mutex_);
+    if (adjust_waiting_ >= kMaxAdjustWaiting) {
+      res.status = res.BUSY;
+      res.message = std::to_string(adjust_waiting_) + " adjust requests wait for an image already: ask again after them";
+      return true;
+    }
     full_search_pending_ = true;  // the next image gets every pass
-    const double timeout = req.timeout > 0 ? req.timeout : 5.0;
+    const double timeout = req.timeout > 0 ? std::min(req.timeout, 10.0) : 5.0;
+    ++adjust_waiting_;
+    struct Done {
+      int& n;
+      ~Done() { --n; }
+    } done{adjust_waiting_};  // under mutex_: the wait below re-locks it before returning
     if (!cv_.wait_for(lock, std::chrono::duration<double>(timeout), [&] { return frames_ > 0 && last_stamp_ >= asked; })) {
       res.status = res.NO_IMAGE;
       res.message = "no fixture camera image within " + std::to_string(timeout) + " s (is fixture_camera/image_raw published?)";
@@ -331,7 +354,6 @@ class QrFrameAdjustment {
   tf2_ros::Buffer buffer_;
   tf2_ros::TransformListener listener_;
   tf2_ros::TransformBroadcaster broadcaster_;
-  image_transport::ImageTransport it_;
   image_transport::CameraSubscriber image_sub_;
   ros::Publisher fixtures_pub_, markers_pub_;
   ros::ServiceServer adjust_srv_, teach_srv_;
@@ -349,6 +371,12 @@ class QrFrameAdjustment {
   ros::Time last_stamp_;
   int registry_codes_ = 1, last_codes_ = 0, full_search_every_ = 10;
   bool full_search_pending_ = false;
+  int adjust_waiting_ = 0;  // ~adjust requests waiting for an image (guarded by mutex_)
+  static constexpr int kMaxAdjustWaiting = 2;
+  ros::NodeHandle image_nh_;
+  ros::CallbackQueue image_queue_;
+  std::unique_ptr<image_transport::ImageTransport> image_it_;
+  std::unique_ptr<ros::AsyncSpinner> image_spinner_;
   uint8_t last_status_ = cellsight::AdjustFixtures::Response::NO_IMAGE;
   std::string last_message_;
   std::map<std::string, cellsight::Fixture> state_;
@@ -357,5 +385,5 @@ class QrFrameAdjustment {
 
 }  // namespace
 
-// four threads: images, ~adjust calls waiting for them (one each), ~teach
+// four threads: up to two ~adjust calls waiting for images, ~teach, the timer (images have their own)
 CELLSIGHT_NODE(QrFrameAdjustment, "qr_frame_adjustment", 4)

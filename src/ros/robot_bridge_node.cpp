@@ -9,6 +9,7 @@
 
 #include <chrono>
 #include <condition_variable>
+#include <atomic>
 #include <future>
 #include <thread>
 #include <tuple>
@@ -78,17 +79,27 @@ class RobotBridgeNode {
     srv.request.timeout = adjust_timeout_;
     // roscpp service calls have no timeout: the call runs on a thread of its own, so a hung
     // qr_frame_adjustment costs this request a timeout, not the bridge its worker
+    // one such call at a time: a hung service costs one thread, not one per request
+    if (adjust_calls_->load() > 0) {
+      a.code = "BUSY";
+      a.message = "the fixture service " + adjust_.getService() + " has not answered the last ADJUST yet";
+      failedAdjust();
+      return a;
+    }
     auto result = std::make_shared<std::promise<std::pair<bool, cellsight::AdjustFixtures>>>();
     auto answer = result->get_future();
-    std::thread([client = adjust_, srv, result]() mutable {
+    ++*adjust_calls_;
+    std::thread([client = adjust_, srv, result, calls = adjust_calls_]() mutable {
       const bool ok = client.call(srv);
       result->set_value({ok, srv});
+      --*calls;
     }).detach();
     if (answer.wait_for(std::chrono::duration<double>(adjust_timeout_ + 5.0)) != std::future_status::ready) {
       a.code = "TIMEOUT";
       a.message = "the fixture service " + adjust_.getService() + " did not answer within " +
                   std::to_string(adjust_timeout_ + 5.0) + " s";
       diag_.dropped("adjust service timed out");
+      failedAdjust();
       return a;
     }
     bool called = false;
@@ -97,13 +108,18 @@ class RobotBridgeNode {
       a.code = "UNAVAILABLE";
       a.message = "the fixture service " + adjust_.getService() + " did not answer (is qr_frame_adjustment running?)";
       diag_.dropped("adjust service unavailable");
+      failedAdjust();
       return a;
     }
     const auto& r = srv.response;
     if (r.status != r.OK || r.fixtures.empty()) {
-      a.code = r.status == r.NO_IMAGE ? "NO_IMAGE" : r.status == r.NO_TRANSFORM ? "NO_TRANSFORM" : "NO_FIXTURE";
+      a.code = r.status == r.NO_IMAGE       ? "NO_IMAGE"
+               : r.status == r.NO_TRANSFORM ? "NO_TRANSFORM"
+               : r.status == r.BUSY         ? "BUSY"
+                                            : "NO_FIXTURE";
       a.message = r.message;
       diag_.processed();
+      if (r.status != r.NO_FIXTURE) failedAdjust();
       return a;
     }
     const auto& f = r.fixtures.front();
@@ -126,7 +142,7 @@ class RobotBridgeNode {
       a.type = f.type;
       a.program = f.program;
       a.ucs = cellsight_ros::fromPoseMsg(f.ucs);
-      a.stale = f.stale;
+      a.stale = f.stale || fixtures_.header.stamp <= adjust_failed_at_;
       return a;
     }
     a.code = "UNKNOWN_PROGRAM";
@@ -159,6 +175,12 @@ class RobotBridgeNode {
     fixtures_ = msg;
   }
 
+  /// The fixtures known so far are reported STALE until an image newer than this failure.
+  void failedAdjust() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    adjust_failed_at_ = ros::Time::now();
+  }
+
   void onCaptureDone(const std_msgs::Bool& msg) {
     if (!msg.data) return;
     {
@@ -179,6 +201,8 @@ class RobotBridgeNode {
   uint64_t captures_ = 0;
   bool waiting_ = false;
   cellsight::FixtureArray fixtures_;
+  ros::Time adjust_failed_at_;  // the latest failed ADJUST (zero: none)
+  std::shared_ptr<std::atomic<int>> adjust_calls_ = std::make_shared<std::atomic<int>>(0);  // fixture service calls running
   std::unique_ptr<cellsight::RobotBridge> bridge_;
 };
 

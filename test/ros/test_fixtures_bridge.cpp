@@ -85,6 +85,29 @@ TEST(FixturesAndBridge, TheCellAsARobotSeesIt) {
   EXPECT_TRUE(buffer.canTransform("base_link", "ucs/pick_c", ros::Time(0), ros::Duration(3.0)));
   EXPECT_TRUE(buffer.canTransform("base_link", "fixture/B", ros::Time(0), ros::Duration(3.0)));
 
+  // four clients asking at once with long timeouts: images go on being processed on their own
+  // thread, two requests wait and are answered with the next image, the others are told BUSY at once
+  {
+    std::vector<uint8_t> statuses(4, 255);
+    std::vector<std::thread> clients;
+    const ros::WallTime t0 = ros::WallTime::now();
+    for (size_t i = 0; i < statuses.size(); ++i)
+      clients.emplace_back([&, i] {
+        ros::ServiceClient c = nh.serviceClient<cellsight::AdjustFixtures>("qr_frame_adjustment/adjust");
+        cellsight::AdjustFixtures s;
+        s.request.timeout = 60;  // clamped to 10 s
+        if (c.call(s)) statuses[i] = s.response.status;
+      });
+    for (auto& t : clients) t.join();
+    EXPECT_LT((ros::WallTime::now() - t0).toSec(), 8.0) << "the waiting requests starved the images";
+    int ok = 0;
+    for (const uint8_t st : statuses) {
+      EXPECT_TRUE(st == cellsight::AdjustFixtures::Response::OK || st == cellsight::AdjustFixtures::Response::BUSY) << int(st);
+      ok += st == cellsight::AdjustFixtures::Response::OK;
+    }
+    EXPECT_GE(ok, 2);
+  }
+
   // teaching: an unknown type is refused; a known one is stored in the teach file
   auto teach = nh.serviceClient<cellsight::TeachFixture>("qr_frame_adjustment/teach");
   cellsight::TeachFixture tr;
