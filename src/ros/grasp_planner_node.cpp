@@ -95,7 +95,16 @@ class GraspPlannerNode {
   }
 
  private:
+  /// A scan that cannot be read is dropped here, the last good one kept: one malformed message
+  /// must not fail every later plan.
   void onCloud(const sensor_msgs::PointCloud2ConstPtr& msg) {
+    try {
+      cellsight_ros::fromCloudMsg(*msg);
+    } catch (const std::exception& e) {
+      ROS_ERROR("grasp_planner: %s dropped, the previous scan kept: %s", cloud_sub_.getTopic().c_str(), e.what());
+      diag_.dropped("unreadable scan");
+      return;
+    }
     std::lock_guard<std::mutex> lock(mutex_);
     cloud_ = msg;
     scene_dirty_ = true;
@@ -234,11 +243,13 @@ class GraspPlannerNode {
     return true;
   }
 
-  /// Every plan to ~output_file (JSON array, atomic).
+  /// The latest kKeptPlans plans to ~output_file (JSON array, atomic): memory and the file's
+  /// rewrite stay bounded however many plans a client asks for.
   void record(const cellsight::PartPlan& p) {
     if (output_file_.empty()) return;
-    nlohmann::json j = {{"object", p.part.name}, {"model", p.part.model}, {"status", cellsight::planStatusName(p.status)},
-                        {"reason", p.reason}, {"plan_seconds", p.seconds}, {"candidates", p.candidates},
+    const auto cut = [](const std::string& t) { return t.size() <= 200 ? t : t.substr(0, 200) + "..."; };
+    nlohmann::json j = {{"object", cut(p.part.name)}, {"model", cut(p.part.model)}, {"status", cellsight::planStatusName(p.status)},
+                        {"reason", cut(p.reason)}, {"plan_seconds", p.seconds}, {"candidates", p.candidates},
                         {"candidates_tried", p.candidates_tried}, {"sampled", p.sampled}};
     if (p.status == cellsight::PlanStatus::kOk) {
       const Eigen::Vector3d t = p.T_base_target.translation();
@@ -250,6 +261,7 @@ class GraspPlannerNode {
       j["trajectory_points"] = p.trajectory.positions.size();
     }
     plans_json_.push_back(j);
+    if (plans_json_.size() > kKeptPlans) plans_json_.erase(plans_json_.begin());
     try {
       cellsight::writeFileAtomic(output_file_, plans_json_.dump(2) + "\n");
     } catch (const std::exception& e) {
@@ -389,6 +401,7 @@ class GraspPlannerNode {
   std::map<std::string, Eigen::Isometry3d, std::less<>, Eigen::aligned_allocator<std::pair<const std::string, Eigen::Isometry3d>>>
       grasp_frames_;
   nlohmann::json plans_json_ = nlohmann::json::array();
+  static constexpr size_t kKeptPlans = 1000;
   ros::Publisher markers_pub_, plan_pub_;
   ros::Subscriber detections_sub_, cloud_sub_, joints_sub_;
   ros::ServiceServer service_;

@@ -101,6 +101,11 @@ TEST(GraspPlannerNode, PlansRefusesAndKeepsAnswering) {
     }
   });
   ros::WallDuration(0.5).sleep();
+  // a malformed scan (data shorter than its sizes) is dropped: the good one before it stays in use
+  sensor_msgs::PointCloud2 broken = cm;
+  broken.data.resize(broken.data.size() / 2);
+  cloud_pub.publish(broken);
+  ros::WallDuration(0.5).sleep();
   r = call(plan, "");
   ASSERT_EQ(r.response.plan.status, cellsight::GraspPlan::OK) << r.response.message;
   const cellsight::GraspPlan& p = r.response.plan;
