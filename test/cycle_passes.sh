@@ -11,25 +11,8 @@ BUILD=$1
 WORK=$2
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 source "$ROOT/scripts/ros-env.sh" "$BUILD"
-rm -rf "$WORK" && mkdir -p "$WORK/live"
-roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$WORK/live" fixtures:=false \
-  calibration_dir:="$WORK/live/truth/calibration" camera_info_from_calibration:=false \
-  >"$WORK/live_launch.log" 2>&1 &
-LAUNCH_PID=$!
-final() { /usr/bin/python3 -c 'import json,sys; sys.exit(0 if json.load(open(sys.argv[1])).get("final") else 1)' "$1" 2>/dev/null; }
-for _ in $(seq 1500); do  # the cycle's detections after its last pass
-  final "$WORK/live/detections_raw.json" && break
-  kill -0 $LAUNCH_PID 2>/dev/null || break
-  sleep 0.2
-done
-sleep 1
-kill -INT $LAUNCH_PID 2>/dev/null
-wait $LAUNCH_PID 2>/dev/null
-if ! final "$WORK/live/detections_raw.json"; then
-  echo "FAIL: no detections after the cycle's last pass (see $WORK/live_launch.log):"
-  grep -E "scan_client|model_matching.*(ERROR|dropped)" "$WORK/live_launch.log" | tail -5
-  exit 1
-fi
+source "$ROOT/test/live_cell.sh"
+live_cell "$WORK" fixtures:=false || exit 1
 failed=0
 /usr/bin/python3 - "$WORK/live/detections_raw.json" "$WORK/live/scan_result.json" <<'PY' || failed=1
 import json, sys

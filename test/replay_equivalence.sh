@@ -10,24 +10,8 @@ BUILD=$1
 WORK=$2
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 source "$ROOT/scripts/ros-env.sh" "$BUILD"
-rm -rf "$WORK" && mkdir -p "$WORK/live"
-roslaunch -p "${ROS_MASTER_URI##*:}" cellsight demo.launch out_dir:="$WORK/live" trajectory:=demo_sweep \
-  calibration_dir:="$WORK/live/truth/calibration" camera_info_from_calibration:=false \
-  >"$WORK/live_launch.log" 2>&1 &
-LAUNCH_PID=$!
-for _ in $(seq 600); do
-  [ -f "$WORK/live/scan_result.json" ] && break
-  kill -0 $LAUNCH_PID 2>/dev/null || break
-  sleep 0.2
-done
-for _ in $(seq 600); do  # the live model_matching's detections of the scan
-  [ -f "$WORK/live/detections_raw.json" ] && break
-  kill -0 $LAUNCH_PID 2>/dev/null || break
-  sleep 0.2
-done
-sleep 1
-kill -INT $LAUNCH_PID 2>/dev/null
-wait $LAUNCH_PID 2>/dev/null
+source "$ROOT/test/live_cell.sh"
+live_cell "$WORK" trajectory:=demo_sweep || exit 1
 [ -f "$WORK/live/scan.ply" ] || { echo "FAIL: the live scan produced no cloud (see $WORK/live_launch.log)"; exit 1; }
 export ROS_MASTER_URI="http://127.0.0.1:$(free_port)"
 bash "$ROOT/scripts/replay.sh" "$BUILD" "$WORK/live/raw.bag" "$WORK/replay.ply" "$WORK/replay_detections.json" ||

@@ -95,18 +95,20 @@ class GraspPlannerNode {
   }
 
  private:
-  /// A scan that cannot be read is dropped here, the last good one kept: one malformed message
-  /// must not fail every later plan.
+  /// The scan read once, here: one that cannot be read is dropped, the last good one kept (one
+  /// malformed message must not fail every later plan).
   void onCloud(const sensor_msgs::PointCloud2ConstPtr& msg) {
+    auto scan = std::make_shared<Scan>();
     try {
-      cellsight_ros::fromCloudMsg(*msg);
+      scan->cloud = cellsight_ros::fromCloudMsg(*msg, &scan->dropped);
     } catch (const std::exception& e) {
       ROS_ERROR("grasp_planner: %s dropped, the previous scan kept: %s", cloud_sub_.getTopic().c_str(), e.what());
       diag_.dropped("unreadable scan");
       return;
     }
+    scan->frame_id = msg->header.frame_id;
     std::lock_guard<std::mutex> lock(mutex_);
-    cloud_ = msg;
+    cloud_ = std::move(scan);
     scene_dirty_ = true;
   }
 
@@ -150,8 +152,8 @@ class GraspPlannerNode {
                false;
       }
     }
-    if (cloud_->header.frame_id != base_frame_) {
-      return *why = "the scan is in '" + cloud_->header.frame_id + "', the planner needs it in '" + base_frame_ + "'", false;
+    if (cloud_->frame_id != base_frame_) {
+      return *why = "the scan is in '" + cloud_->frame_id + "', the planner needs it in '" + base_frame_ + "'", false;
     }
     parts_.clear();
     for (const auto& d : detections_->detections) {
@@ -164,8 +166,8 @@ class GraspPlannerNode {
         ROS_WARN("grasp_planner: detection '%s' skipped: %s", d.name.c_str(), e.what());
       }
     }
-    size_t dropped = 0;
-    const cellsight::ScanCloud cloud = cellsight_ros::fromCloudMsg(*cloud_, &dropped);
+    const cellsight::ScanCloud& cloud = cloud_->cloud;
+    const size_t dropped = cloud_->dropped;
     cellsight::CollisionWorld world(cellsight::CollisionWorldConfig{}, table_z_, table_center_, table_size_);
     const ros::WallTime t0 = ros::WallTime::now();
     planner_->setScene(world, parts_, cloud.points);
@@ -394,7 +396,12 @@ class GraspPlannerNode {
   cellsight::JointVector joints_ = cellsight::JointVector::Zero();
   ros::Time joints_stamp_, last_tf_;
   cellsight::DetectionArrayConstPtr detections_;
-  sensor_msgs::PointCloud2ConstPtr cloud_;
+  struct Scan {
+    cellsight::ScanCloud cloud;
+    size_t dropped = 0;  // invalid points left out when it was read
+    std::string frame_id;
+  };
+  std::shared_ptr<const Scan> cloud_;  // the latest readable scan
   bool scene_dirty_ = false;
   std::vector<cellsight::LocatedPart> parts_;
   std::map<std::string, cellsight::PartPlan> last_ok_;
